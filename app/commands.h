@@ -1,0 +1,17 @@
+#pragma once
+// Each subcommand registers its options on the CLI11 app and returns the function that runs it.
+// Commands stay thin: parse options, call library code, print (human text on stderr, data on
+// stdout with --json).
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+namespace previz::app {
+
+using Runner = std::function<int()>;
+
+Runner addSynthCommand(CLI::App& app);
+Runner addDemoCommand(CLI::App& app);
+Runner addCameraCommand(CLI::App& app);
+
+}  // namespace previz::app

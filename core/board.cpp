@@ -1,0 +1,278 @@
+#include "core/board.h"
+
+#include <cmath>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/io.h"
+
+namespace previz {
+
+namespace {
+
+// Marker grid size (bits, without the black border) and code count of the dictionaries a
+// board may name. Kept here rather than asked of OpenCV so that core validates boards without
+// the aruco module; the values are OpenCV's predefined dictionaries (aruco/dictionary.hpp).
+struct DictionaryInfo {
+  const char* name;
+  int marker_bits;
+  int size;
+};
+constexpr DictionaryInfo kDictionaries[] = {
+    {"DICT_4X4_50", 4, 50},          {"DICT_4X4_100", 4, 100},
+    {"DICT_4X4_250", 4, 250},        {"DICT_4X4_1000", 4, 1000},
+    {"DICT_5X5_50", 5, 50},          {"DICT_5X5_100", 5, 100},
+    {"DICT_5X5_250", 5, 250},        {"DICT_5X5_1000", 5, 1000},
+    {"DICT_6X6_50", 6, 50},          {"DICT_6X6_100", 6, 100},
+    {"DICT_6X6_250", 6, 250},        {"DICT_6X6_1000", 6, 1000},
+    {"DICT_7X7_50", 7, 50},          {"DICT_7X7_100", 7, 100},
+    {"DICT_7X7_250", 7, 250},        {"DICT_7X7_1000", 7, 1000},
+    {"DICT_ARUCO_ORIGINAL", 5, 1024}, {"DICT_APRILTAG_16h5", 4, 30},
+    {"DICT_APRILTAG_25h9", 5, 35},   {"DICT_APRILTAG_36h10", 6, 2320},
+    {"DICT_APRILTAG_36h11", 6, 587},
+};
+constexpr int kTag36h11Codes = 587;  // libapriltag's tag36h11 family
+
+const DictionaryInfo* findDictionary(const std::string& name) {
+  for (const auto& d : kDictionaries)
+    if (name == d.name) return &d;
+  return nullptr;
+}
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+[[noreturn]] void fail(const std::string& field, const std::string& what) {
+  ErrorContext context;
+  context.field = field;
+  throw Error("board: " + field + " " + what, context);
+}
+
+void requirePositive(const std::string& field, double v) {
+  if (!(std::isfinite(v) && v > 0)) fail(field, "must be a finite number > 0 (got " + num(v) + ")");
+}
+
+BoardType boardTypeFromString(const std::string& s, const std::string& file) {
+  if (s == "chessboard") return BoardType::kChessboard;
+  if (s == "charuco") return BoardType::kCharuco;
+  if (s == "aprilgrid") return BoardType::kAprilGrid;
+  if (s == "circles") return BoardType::kCircles;
+  ErrorContext context;
+  context.file = file;
+  context.field = "type";
+  throw Error("board: unknown type '" + s + "' (expected chessboard|charuco|aprilgrid|circles)",
+              context);
+}
+
+}  // namespace
+
+const char* toString(BoardType type) {
+  switch (type) {
+    case BoardType::kChessboard: return "chessboard";
+    case BoardType::kCharuco: return "charuco";
+    case BoardType::kAprilGrid: return "aprilgrid";
+    case BoardType::kCircles: return "circles";
+  }
+  return "unknown";
+}
+
+void BoardSpec::validate() const {
+  // Chessboards need at least 2 x 2 inner corners for OpenCV's detector; the others at least
+  // one cell. 200 is far beyond any printable board and keeps ids within int.
+  const int min_cells = type == BoardType::kChessboard ? 3
+                        : type == BoardType::kCharuco  ? 2
+                                                       : 1;
+  if (rows < min_cells || rows > 200)
+    fail("rows", "must be in [" + std::to_string(min_cells) + ", 200] for a " +
+                     toString(type) + " (got " + std::to_string(rows) + ")");
+  if (cols < min_cells || cols > 200)
+    fail("cols", "must be in [" + std::to_string(min_cells) + ", 200] for a " +
+                     toString(type) + " (got " + std::to_string(cols) + ")");
+  requirePositive("square_m", square_m);
+  if (!(std::isfinite(margin_m) && margin_m >= 0))
+    fail("margin_m", "must be a finite number >= 0 (got " + num(margin_m) + ")");
+  if (first_id < 0) fail("first_id", "must be >= 0 (got " + std::to_string(first_id) + ")");
+  if (legacy_pattern && type != BoardType::kCharuco)
+    fail("legacy_pattern", "applies to charuco boards only (this board is a " +
+                               std::string(toString(type)) + ")");
+
+  switch (type) {
+    case BoardType::kChessboard: break;
+    case BoardType::kCharuco: {
+      requirePositive("marker_m", marker_m);
+      if (marker_m >= square_m)
+        fail("marker_m", "must be smaller than square_m (" + num(square_m) + ") (got " +
+                             num(marker_m) + ")");
+      const DictionaryInfo* d = findDictionary(dictionary);
+      if (!d) fail("dictionary", "'" + dictionary + "' is not an OpenCV predefined dictionary");
+      const int markers = rows * cols / 2;  // one per white square
+      if (first_id + markers > d->size)
+        fail("first_id", "+ " + std::to_string(markers) + " markers exceeds the " +
+                             std::to_string(d->size) + " codes of " + dictionary);
+      break;
+    }
+    case BoardType::kAprilGrid: {
+      requirePositive("marker_m", marker_m);  // the gap between tags
+      if (dictionary != "tag36h11")
+        fail("dictionary", "must be 'tag36h11' for an aprilgrid (got '" + dictionary + "')");
+      if (first_id + rows * cols > kTag36h11Codes)
+        fail("first_id", "+ " + std::to_string(rows * cols) + " tags exceeds the " +
+                             std::to_string(kTag36h11Codes) + " codes of tag36h11");
+      break;
+    }
+    case BoardType::kCircles: {
+      requirePositive("circle_radius_m", circle_radius_m);
+      if (2 * circle_radius_m >= square_m)
+        fail("circle_radius_m", "must be below half the pitch square_m (" + num(square_m) +
+                                    ") so circles do not touch (got " + num(circle_radius_m) +
+                                    ")");
+      break;
+    }
+  }
+}
+
+Eigen::Vector2d BoardSpec::size_m() const {
+  switch (type) {
+    case BoardType::kChessboard:
+    case BoardType::kCharuco:
+    case BoardType::kCircles:  // circle centres at (c + 1/2, r + 1/2) pitches
+      return {cols * square_m, rows * square_m};
+    case BoardType::kAprilGrid:  // Kalibr: corner squares of the gap size around every tag
+      return {cols * square_m + (cols + 1) * marker_m, rows * square_m + (rows + 1) * marker_m};
+  }
+  return Eigen::Vector2d::Zero();
+}
+
+std::vector<BoardPoint> boardPoints(const BoardSpec& spec) {
+  spec.validate();
+  std::vector<BoardPoint> points;
+  const double s = spec.square_m;
+  switch (spec.type) {
+    case BoardType::kChessboard:
+    case BoardType::kCharuco:
+      points.reserve(static_cast<size_t>((spec.rows - 1) * (spec.cols - 1)));
+      for (int r = 0; r + 1 < spec.rows; ++r)
+        for (int c = 0; c + 1 < spec.cols; ++c)
+          points.push_back({r * (spec.cols - 1) + c, Eigen::Vector3d((c + 1) * s, (r + 1) * s, 0)});
+      break;
+    case BoardType::kAprilGrid: {
+      const double g = spec.marker_m;
+      points.reserve(static_cast<size_t>(4 * spec.rows * spec.cols));
+      for (int r = 0; r < spec.rows; ++r)
+        for (int c = 0; c < spec.cols; ++c) {
+          const int tag = r * spec.cols + c;
+          const double x0 = g + c * (s + g), y0 = g + r * (s + g);  // top-left as printed
+          // Kalibr's order, which is also libapriltag's p[0..3]: bl, br, tr, tl.
+          points.push_back({4 * tag + 0, Eigen::Vector3d(x0, y0 + s, 0)});
+          points.push_back({4 * tag + 1, Eigen::Vector3d(x0 + s, y0 + s, 0)});
+          points.push_back({4 * tag + 2, Eigen::Vector3d(x0 + s, y0, 0)});
+          points.push_back({4 * tag + 3, Eigen::Vector3d(x0, y0, 0)});
+        }
+      break;
+    }
+    case BoardType::kCircles:
+      points.reserve(static_cast<size_t>(spec.rows * spec.cols));
+      for (int r = 0; r < spec.rows; ++r)
+        for (int c = 0; c < spec.cols; ++c)
+          points.push_back({r * spec.cols + c, Eigen::Vector3d((c + 0.5) * s, (r + 0.5) * s, 0)});
+      break;
+  }
+  return points;
+}
+
+nlohmann::json boardToJson(const BoardSpec& spec) {
+  nlohmann::json j;
+  j["type"] = toString(spec.type);
+  j["rows"] = spec.rows;
+  j["cols"] = spec.cols;
+  j["square_m"] = spec.square_m;
+  j["marker_m"] = spec.marker_m;
+  j["circle_radius_m"] = spec.circle_radius_m;
+  j["dictionary"] = spec.dictionary;
+  j["first_id"] = spec.first_id;
+  j["legacy_pattern"] = spec.legacy_pattern;
+  j["margin_m"] = spec.margin_m;
+  j["units"] = "m";
+  j["frame"] = "origin at the top-left outer corner of the pattern, x along columns, y down rows";
+  return j;
+}
+
+BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file) {
+  auto fieldError = [&](const std::string& field, const std::string& what) {
+    ErrorContext context;
+    context.file = file;
+    context.field = field;
+    return Error("board: " + field + " " + what, context);
+  };
+  if (!j.is_object()) throw fieldError("(root)", "must be a JSON object");
+  auto number = [&](const char* key, double fallback, bool required) {
+    if (!j.contains(key)) {
+      if (required) throw fieldError(key, "is missing");
+      return fallback;
+    }
+    const auto& v = j.at(key);
+    if (!v.is_number()) throw fieldError(key, "must be a number (got " + v.dump() + ")");
+    return v.get<double>();
+  };
+  auto integer = [&](const char* key, int fallback, bool required) {
+    if (!j.contains(key)) {
+      if (required) throw fieldError(key, "is missing");
+      return fallback;
+    }
+    const auto& v = j.at(key);
+    if (!v.is_number_integer()) throw fieldError(key, "must be an integer (got " + v.dump() + ")");
+    const auto x = v.get<long long>();
+    if (x < -1000000 || x > 1000000) throw fieldError(key, "is out of range (got " + v.dump() + ")");
+    return static_cast<int>(x);
+  };
+
+  BoardSpec spec;
+  if (!j.contains("type")) throw fieldError("type", "is missing");
+  if (!j.at("type").is_string()) throw fieldError("type", "must be a string");
+  spec.type = boardTypeFromString(j.at("type").get<std::string>(), file);
+  spec.rows = integer("rows", spec.rows, true);
+  spec.cols = integer("cols", spec.cols, true);
+  spec.square_m = number("square_m", spec.square_m, true);
+  spec.marker_m = number("marker_m", spec.marker_m, false);
+  spec.circle_radius_m = number("circle_radius_m", spec.circle_radius_m, false);
+  spec.first_id = integer("first_id", spec.first_id, false);
+  spec.margin_m = number("margin_m", spec.margin_m, false);
+  if (j.contains("dictionary")) {
+    if (!j.at("dictionary").is_string()) throw fieldError("dictionary", "must be a string");
+    spec.dictionary = j.at("dictionary").get<std::string>();
+  }
+  if (j.contains("legacy_pattern")) {
+    if (!j.at("legacy_pattern").is_boolean()) throw fieldError("legacy_pattern", "must be true or false");
+    spec.legacy_pattern = j.at("legacy_pattern").get<bool>();
+  }
+  try {
+    spec.validate();
+  } catch (const Error& e) {
+    ErrorContext context = e.context();
+    context.file = file;
+    throw Error(e.message(), context);
+  }
+  return spec;
+}
+
+BoardSpec readBoard(const std::filesystem::path& path) {
+  return boardFromJson(readJsonFile(path), path.string());
+}
+
+void writeBoard(const BoardSpec& spec, const std::filesystem::path& path) {
+  try {
+    spec.validate();
+  } catch (const Error& e) {
+    ErrorContext context = e.context();
+    context.file = path.string();
+    throw Error(e.message(), context);
+  }
+  writeJsonAtomic(path, boardToJson(spec));
+}
+
+}  // namespace previz

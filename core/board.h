@@ -1,0 +1,52 @@
+#pragma once
+// Calibration board descriptions shared by the synthetic studio (which draws them) and calib
+// (which detects them). The board frame: origin at the top-left outer corner of the printed
+// pattern, x along the columns, y along the rows (down the print), z = x × y (into the board,
+// away from a viewer who reads the print). Points lie at z = 0. Metres.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json_fwd.hpp>
+
+namespace previz {
+
+enum class BoardType { kChessboard, kCharuco, kAprilGrid, kCircles };
+const char* toString(BoardType type);
+
+struct BoardSpec {
+  BoardType type = BoardType::kChessboard;
+  int rows = 7;                 // squares (chessboard, ChArUco), tags (AprilGrid), circles
+  int cols = 10;
+  double square_m = 0.04;       // chessboard/ChArUco square; AprilGrid tag edge; circle pitch
+  double marker_m = 0.03;       // ChArUco marker edge; AprilGrid: spacing = marker_m (gap)
+  double circle_radius_m = 0.0; // concentric circles: outer radius (rings at 1, 2/3, 1/3)
+  std::string dictionary = "DICT_5X5_1000";  // ChArUco (OpenCV name) or "tag36h11"
+  int first_id = 0;             // first marker / tag id
+  bool legacy_pattern = false;  // ChArUco: OpenCV < 4.6 layout for even row counts
+  double margin_m = 0.01;       // white border around the pattern when printed
+
+  void validate() const;        // throws Error naming the bad field
+  // Extent of the pattern (without margin), metres: (width along x, height along y).
+  Eigen::Vector2d size_m() const;
+};
+
+// A detectable point of the board: the id a detector reports and its board-frame position.
+//  chessboard: inner corners, row-major, id = r * (cols - 1) + c (OpenCV's order)
+//  ChArUco:    inner chessboard corners, OpenCV's charuco ids (row-major)
+//  AprilGrid:  4 corners per tag, id = 4 * tag_index + corner (Kalibr order: bl, br, tr, tl
+//              as seen in the print), tag_index row-major from the top-left
+//  circles:    circle centres, row-major
+struct BoardPoint {
+  int id;
+  Eigen::Vector3d p_board;
+};
+std::vector<BoardPoint> boardPoints(const BoardSpec& spec);
+
+nlohmann::json boardToJson(const BoardSpec& spec);
+BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file = {});
+BoardSpec readBoard(const std::filesystem::path& path);
+void writeBoard(const BoardSpec& spec, const std::filesystem::path& path);  // atomic
+
+}  // namespace previz

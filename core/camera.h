@@ -1,0 +1,125 @@
+#pragma once
+// Pinhole camera with Brown–Conrady distortion in OpenCV's convention: the model distorts
+// ideal normalized coordinates (x, y) = (X/Z, Y/Z):
+//   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+//   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2)
+//   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
+//   u = fx xd + skew yd + cx,  v = fy yd + cy
+// Pixel (0,0) is the centre of the top-left pixel; camera frame x right, y down, z forward.
+// See docs/conventions.md.
+#include <Eigen/Core>
+#include <limits>
+#include <optional>
+#include <string>
+
+namespace previz {
+
+struct Distortion {
+  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
+  bool isZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+};
+
+// Inverse of the distortion (distorted normalized -> ideal normalized).
+enum class InverseMethod {
+  kFixedPoint,  // the thesis' iteration (Abeles): x <- (xd - tangential(x)) / radial(x)
+  kNewton,      // Gauss–Newton on the 2x2 Jacobian of distort(), started at x = xd
+};
+
+enum class InverseStatus {
+  kConverged,      // |distort(x) - xd| <= tolerance
+  kNotConverged,   // ran out of iterations while still improving (slow)
+  kDiverged,       // the iterate grew without bound or oscillated
+  kNotInvertible,  // xd lies outside the image of the invertible domain (past the turning point)
+};
+
+const char* toString(InverseStatus status);
+const char* toString(InverseMethod method);
+
+struct InverseOptions {
+  InverseMethod method = InverseMethod::kNewton;
+  int max_iterations = 100;
+  double tolerance = 1e-13;  // on |distort(x) - xd| in normalized units
+  void validate() const;     // throws Error naming the field
+};
+
+struct InverseResult {
+  Eigen::Vector2d point = Eigen::Vector2d::Zero();  // ideal normalized coordinates
+  int iterations = 0;
+  double residual = std::numeric_limits<double>::infinity();  // |distort(point) - xd|
+  InverseStatus status = InverseStatus::kNotConverged;
+  bool ok() const { return status == InverseStatus::kConverged; }
+};
+
+// The inverse of one lens's distortion with its invertible domain worked out once (turning
+// radius, bound on the image of the domain). Camera::undistort builds one per call; loops over
+// many points (maps, benchmarks) build one and reuse it. Cheap to copy, immutable, thread-safe.
+class InverseDistortion {
+ public:
+  explicit InverseDistortion(const Distortion& dist);
+  InverseResult solve(const Eigen::Vector2d& xd, const InverseOptions& options = {}) const;
+  // See Camera::maxInvertibleRadius().
+  double maxInvertibleRadius() const { return r_max_; }
+  // True when the ideal point x lies in the invertible domain: |x| below the turning radius
+  // and, with tangential terms, det(d distort / d x) > 0.
+  bool inDomain(const Eigen::Vector2d& x) const;
+  // Distorted points farther than this from the centre have no preimage in the domain
+  // (+inf when the radial map never turns).
+  double maxDistortedRadius() const { return rd_max_; }
+
+ private:
+  InverseResult newton(const Eigen::Vector2d& xd, const InverseOptions& options) const;
+  InverseResult fixedPoint(const Eigen::Vector2d& xd, const InverseOptions& options) const;
+  Distortion dist_;
+  bool has_tangential_ = false;
+  double s_max_;   // squared turning radius
+  double r_max_;
+  double rd_max_;
+};
+
+class Camera {
+ public:
+  std::string name;
+  int width = 0;
+  int height = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0, skew = 0;
+  Distortion dist;
+
+  // Throws previz::Error naming the camera and the bad field.
+  void validate() const;
+
+  Eigen::Matrix3d K() const;
+
+  // Ideal normalized -> distorted normalized (forward Brown model).
+  Eigen::Vector2d distort(const Eigen::Vector2d& x) const;
+  // d distort / d x (2x2).
+  Eigen::Matrix2d distortJacobian(const Eigen::Vector2d& x) const;
+  // Distorted normalized -> ideal normalized, with a convergence report.
+  InverseResult undistort(const Eigen::Vector2d& xd, const InverseOptions& options = {}) const;
+
+  // Radius (ideal normalized) at which the radial map r -> r (1 + k1 r^2 + k2 r^4 + k3 r^6)
+  // stops increasing; +inf when it never does. Points past it fold back onto the image and
+  // are reported as not invertible / not projectable.
+  double maxInvertibleRadius() const;
+  // True when the ideal normalized point lies in the invertible domain (see InverseDistortion).
+  bool inInvertibleDomain(const Eigen::Vector2d& x) const;
+
+  // Normalized (distorted) <-> pixel through K (skew included).
+  Eigen::Vector2d normalizedToPixel(const Eigen::Vector2d& xd) const;
+  Eigen::Vector2d pixelToNormalized(const Eigen::Vector2d& px) const;
+
+  // 3-D point in the camera frame -> pixel. nullopt when z <= 0 or when the point lies past
+  // the invertible radius. Does not clip to the image (use inImage()).
+  std::optional<Eigen::Vector2d> project(const Eigen::Vector3d& p_cam) const;
+  // Pixel -> unit ray in the camera frame (z > 0). nullopt when the pixel is not invertible.
+  std::optional<Eigen::Vector3d> unproject(const Eigen::Vector2d& px,
+                                           const InverseOptions& options = {}) const;
+
+  // True when the pixel centre lies within [-0.5 + margin, width - 0.5 - margin] (same in y).
+  bool inImage(const Eigen::Vector2d& px, double margin = 0) const;
+
+  // The same camera at another resolution (intrinsics scaled about the pixel-centre
+  // convention: c' = (c + 0.5) s - 0.5).
+  Camera scaled(double scale_x, double scale_y) const;
+};
+
+}  // namespace previz

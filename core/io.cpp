@@ -1,0 +1,303 @@
+#include "core/io.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStdIO.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace previz {
+
+namespace {
+
+ErrorContext fileContext(const fs::path& path) {
+  ErrorContext c;
+  c.file = path.string();
+  return c;
+}
+
+// Where the original channel order is kept: OpenEXR lists channels alphabetically.
+constexpr const char* kChannelOrderAttribute = "previz:channels";
+
+std::string joinNames(const std::vector<std::string>& names) {
+  std::string s;
+  for (size_t i = 0; i < names.size(); ++i) s += (i ? "," : "") + names[i];
+  return s;
+}
+
+std::vector<std::string> splitNames(const std::string& s) {
+  std::vector<std::string> out;
+  std::string item;
+  std::istringstream in(s);
+  while (std::getline(in, item, ',')) out.push_back(item);
+  return out;
+}
+
+}  // namespace
+
+void writeFileAtomic(const fs::path& path, const std::string& bytes) {
+  if (path.empty() || path.filename().empty())
+    throw Error("cannot write: the path names no file", fileContext(path));
+  const fs::path parent = path.parent_path();
+  std::error_code ec;
+  if (!parent.empty()) {
+    fs::create_directories(parent, ec);
+    if (ec) throw Error("cannot create folder '" + parent.string() + "': " + ec.message(), fileContext(path));
+  }
+  // A unique temporary beside the target (same file system, so rename is atomic); unique per
+  // process, thread and call so concurrent writers of one target never share a temporary.
+  static std::atomic<unsigned long> counter{0};
+  std::ostringstream tmp_name;
+  tmp_name << "." << path.filename().string() << ".tmp." << ::getpid() << "."
+           << std::hash<std::thread::id>{}(std::this_thread::get_id()) % 100000 << "."
+           << counter.fetch_add(1);
+  const fs::path tmp = parent / tmp_name.str();
+
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0)
+    throw Error(std::string("cannot create temporary file: ") + std::strerror(errno), fileContext(path));
+  const char* p = bytes.data();
+  size_t left = bytes.size();
+  while (left > 0) {
+    const ssize_t n = ::write(fd, p, left);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const int e = errno;
+      ::close(fd);
+      fs::remove(tmp, ec);
+      throw Error(std::string("write failed: ") + std::strerror(e), fileContext(path));
+    }
+    p += n;
+    left -= static_cast<size_t>(n);
+  }
+  // fsync before rename: otherwise a power cut can leave the new name pointing at no data.
+  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+    const int e = errno;
+    fs::remove(tmp, ec);
+    throw Error(std::string("cannot flush file: ") + std::strerror(e), fileContext(path));
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    std::error_code ec2;
+    fs::remove(tmp, ec2);
+    throw Error("cannot rename temporary into place: " + ec.message(), fileContext(path));
+  }
+}
+
+void writeJsonAtomic(const fs::path& path, const nlohmann::json& j, int indent) {
+  writeFileAtomic(path, j.dump(indent) + "\n");
+}
+
+void writeImageAtomic(const fs::path& path, const cv::Mat& image) {
+  if (image.empty()) throw Error("cannot write an empty image", fileContext(path));
+  const std::string ext = path.extension().string();
+  if (ext.empty()) throw Error("no file extension to choose the image format", fileContext(path));
+  std::vector<uchar> buf;
+  bool ok = false;
+  try {
+    ok = cv::imencode(ext, image, buf);
+  } catch (const cv::Exception& e) {
+    throw Error("cannot encode image as '" + ext + "': " + e.what(), fileContext(path));
+  }
+  if (!ok) throw Error("cannot encode image as '" + ext + "'", fileContext(path));
+  writeFileAtomic(path, std::string(buf.begin(), buf.end()));
+}
+
+std::string readTextFile(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error("file does not exist", fileContext(path));
+  if (fs::is_directory(path, ec)) throw Error("is a folder, expected a file", fileContext(path));
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(std::string("cannot open file: ") + std::strerror(errno), fileContext(path));
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) throw Error("read failed", fileContext(path));
+  return s.str();
+}
+
+nlohmann::json readJsonFile(const fs::path& path) {
+  const std::string text = readTextFile(path);
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw Error(std::string("not valid JSON: ") + e.what(), fileContext(path));
+  }
+}
+
+cv::Mat readImage(const fs::path& path, int flags) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error("image file does not exist", fileContext(path));
+  if (fs::is_directory(path, ec)) throw Error("is a folder, expected an image file", fileContext(path));
+  cv::Mat image;
+  try {
+    image = cv::imread(path.string(), flags);
+  } catch (const cv::Exception& e) {
+    throw Error(std::string("cannot decode image: ") + e.what(), fileContext(path));
+  }
+  if (image.empty())
+    throw Error("not a readable image (corrupt, truncated or unsupported format)", fileContext(path));
+  return image;
+}
+
+void writeExr(const fs::path& path, const ExrImage& exr) {
+  const cv::Mat& img = exr.image;
+  if (img.empty()) throw Error("cannot write an empty EXR image", fileContext(path));
+  if (img.depth() != CV_32F)
+    throw Error("EXR images must be CV_32F (float channels)", fileContext(path));
+  const int n = img.channels();
+  if (static_cast<int>(exr.channels.size()) != n)
+    throw Error("EXR: " + std::to_string(n) + " channels in the image but " +
+                    std::to_string(exr.channels.size()) + " names",
+                fileContext(path));
+  std::set<std::string> unique(exr.channels.begin(), exr.channels.end());
+  if (unique.size() != exr.channels.size() || unique.count(""))
+    throw Error("EXR channel names must be distinct and non-empty", fileContext(path));
+
+  try {
+    Imf::Header header(img.cols, img.rows);
+    header.compression() = Imf::ZIP_COMPRESSION;
+    for (const auto& name : exr.channels) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+    for (const auto& [key, value] : exr.attributes) {
+      if (key == kChannelOrderAttribute) continue;
+      header.insert(key, Imf::StringAttribute(value));
+    }
+    header.insert(kChannelOrderAttribute, Imf::StringAttribute(joinNames(exr.channels)));
+
+    Imf::FrameBuffer fb;
+    char* base = const_cast<char*>(reinterpret_cast<const char*>(img.data));
+    for (int c = 0; c < n; ++c)
+      fb.insert(exr.channels[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float),
+                                            n * sizeof(float), img.step[0]));
+    Imf::StdOSStream out;
+    {
+      Imf::OutputFile file(out, header);
+      file.setFrameBuffer(fb);
+      file.writePixels(img.rows);
+    }
+    writeFileAtomic(path, out.str());
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error(std::string("cannot write EXR: ") + e.what(), fileContext(path));
+  }
+}
+
+ExrImage readExr(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error("EXR file does not exist", fileContext(path));
+  ExrImage exr;
+  try {
+    Imf::InputFile file(path.c_str());
+    const Imf::Header& header = file.header();
+    const Imath::Box2i dw = header.dataWindow();
+    const int width = dw.max.x - dw.min.x + 1;
+    const int height = dw.max.y - dw.min.y + 1;
+
+    std::vector<std::string> names;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
+      names.push_back(it.name());
+    std::string order;
+    for (auto it = header.begin(); it != header.end(); ++it) {
+      const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute());
+      if (!s) continue;
+      if (std::string(it.name()) == kChannelOrderAttribute) {
+        order = s->value();
+      } else {
+        exr.attributes[it.name()] = s->value();
+      }
+    }
+    // Restore the writer's order when it is recorded and consistent; otherwise RGBA first,
+    // then the rest alphabetically.
+    std::vector<std::string> recorded = splitNames(order);
+    std::vector<std::string> sorted_rec = recorded, sorted_names = names;
+    std::sort(sorted_rec.begin(), sorted_rec.end());
+    std::sort(sorted_names.begin(), sorted_names.end());
+    if (!order.empty() && sorted_rec == sorted_names) {
+      names = recorded;
+    } else {
+      auto rank = [](const std::string& s) {
+        static const char* rgba[] = {"R", "G", "B", "A"};
+        for (int i = 0; i < 4; ++i)
+          if (s == rgba[i]) return i;
+        return 4;
+      };
+      std::stable_sort(names.begin(), names.end(), [&](const std::string& a, const std::string& b) {
+        return rank(a) < rank(b);
+      });
+    }
+    const int n = static_cast<int>(names.size());
+    if (n < 1 || n > CV_CN_MAX) throw Error("EXR has no usable channels", fileContext(path));
+    exr.channels = names;
+    exr.image = cv::Mat(height, width, CV_32FC(n), cv::Scalar::all(0));
+    Imf::FrameBuffer fb;
+    // OpenEXR addresses the buffer with absolute data-window coordinates.
+    char* base = reinterpret_cast<char*>(exr.image.data) -
+                 static_cast<std::ptrdiff_t>(dw.min.x) * n * sizeof(float) -
+                 static_cast<std::ptrdiff_t>(dw.min.y) * exr.image.step[0];
+    for (int c = 0; c < n; ++c)
+      fb.insert(names[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float), n * sizeof(float),
+                                     exr.image.step[0]));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error(std::string("cannot read EXR (corrupt or not an EXR file): ") + e.what(),
+                fileContext(path));
+  }
+  return exr;
+}
+
+void writeDepthExr(const fs::path& path, const cv::Mat& depth_m,
+                   std::map<std::string, std::string> attributes) {
+  if (depth_m.empty() || depth_m.channels() != 1)
+    throw Error("depth map must be a non-empty one-channel image", fileContext(path));
+  ExrImage exr;
+  if (depth_m.depth() == CV_32F) {
+    exr.image = depth_m;
+  } else if (depth_m.depth() == CV_64F) {
+    depth_m.convertTo(exr.image, CV_32F);  // +inf stays +inf
+  } else {
+    throw Error("depth map must be CV_32F or CV_64F (metres)", fileContext(path));
+  }
+  exr.channels = {"Z"};
+  attributes.emplace("previz:depth",
+                     "metric z along the camera axis (not ray length), metres; +inf where empty");
+  attributes.emplace("previz:pixel_origin", "pixel (0,0) is the centre of the top-left pixel");
+  exr.attributes = std::move(attributes);
+  writeExr(path, exr);
+}
+
+cv::Mat readDepthExr(const fs::path& path) {
+  ExrImage exr = readExr(path);
+  const auto it = std::find(exr.channels.begin(), exr.channels.end(), "Z");
+  if (it == exr.channels.end())
+    throw Error("depth EXR has no channel 'Z' (channels: " + joinNames(exr.channels) + ")",
+                fileContext(path));
+  if (exr.channels.size() == 1) return exr.image;
+  cv::Mat z;
+  cv::extractChannel(exr.image, z, static_cast<int>(it - exr.channels.begin()));
+  return z;
+}
+
+}  // namespace previz

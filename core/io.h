@@ -1,0 +1,41 @@
+#pragma once
+// File output that never leaves a half-written file (write to a temporary beside the target,
+// then rename), and image / EXR / JSON readers that throw previz::Error naming the file.
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+namespace previz {
+
+// Writes bytes to path atomically (temp file in the same folder + rename). Creates parent
+// folders. Throws Error naming the file on failure.
+void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
+void writeJsonAtomic(const std::filesystem::path& path, const nlohmann::json& j, int indent = 2);
+// Any format cv::imwrite knows, by extension (.png, .jpg, ...), atomically.
+void writeImageAtomic(const std::filesystem::path& path, const cv::Mat& image);
+
+std::string readTextFile(const std::filesystem::path& path);
+nlohmann::json readJsonFile(const std::filesystem::path& path);
+// cv::imread with a clear error (missing file / not an image / empty) naming the file.
+cv::Mat readImage(const std::filesystem::path& path, int flags = -1 /* IMREAD_UNCHANGED */);
+
+// Float EXR images (OpenEXR, uncompressed-or-ZIP, FLOAT channels), written atomically.
+// 'image' is CV_32FC1 (one channel, named channels[0]) or CV_32FC2/3/4 with as many names.
+// 'attributes' become string header attributes (e.g. "previz:pixel_origin").
+struct ExrImage {
+  cv::Mat image;                                   // CV_32FC(n)
+  std::vector<std::string> channels;               // one name per channel
+  std::map<std::string, std::string> attributes;   // string attributes in the header
+};
+void writeExr(const std::filesystem::path& path, const ExrImage& exr);
+ExrImage readExr(const std::filesystem::path& path);
+
+// Depth maps: metric z along the camera axis, +inf where empty, channel "Z".
+void writeDepthExr(const std::filesystem::path& path, const cv::Mat& depth_m,
+                   std::map<std::string, std::string> attributes = {});
+cv::Mat readDepthExr(const std::filesystem::path& path);
+
+}  // namespace previz

@@ -1,0 +1,451 @@
+#include "datasets/render.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <omp.h>
+
+#include "core/error.h"
+#include "datasets/random.h"
+
+namespace previz::synth {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+[[noreturn]] void fail(const std::string& field, const std::string& message) {
+  ErrorContext context;
+  context.field = field;
+  throw Error("render: " + field + " " + message, context);
+}
+
+int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
+
+// The Brown model of core/camera.h, evaluated together with its Jacobian in one pass. The inner
+// loop inverts it for every sample; Camera::distort/distortJacobian return through two
+// out-of-line calls each, which cost more than the arithmetic. The test
+// Render.PixelRayEqualsUnprojectAndProjectsBackBelowNanoPixel holds this copy to Camera::unproject.
+struct Brown {
+  double k1, k2, k3, p1, p2;
+  double r2_max;  // squared ideal radius where the radial map folds (inf when it never does)
+
+  explicit Brown(const Camera& c)
+      : k1(c.dist.k1), k2(c.dist.k2), k3(c.dist.k3), p1(c.dist.p1), p2(c.dist.p2) {
+    const double r = c.maxInvertibleRadius();
+    r2_max = std::isfinite(r) ? r * r : std::numeric_limits<double>::infinity();
+  }
+
+  // f = distort(x) - target, J = d distort / dx.
+  void evaluate(double x, double y, double tx, double ty, double& fx, double& fy, double& j00,
+                double& j01, double& j10, double& j11) const {
+    const double x2 = x * x, y2 = y * y, xy = x * y;
+    const double r2 = x2 + y2;
+    const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    const double dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);  // d radial / d r2
+    fx = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x2) - tx;
+    fy = y * radial + p1 * (r2 + 2.0 * y2) + 2.0 * p2 * xy - ty;
+    j00 = radial + 2.0 * x2 * dradial + 2.0 * p1 * y + 6.0 * p2 * x;
+    j01 = 2.0 * xy * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
+    j10 = 2.0 * xy * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
+    j11 = radial + 2.0 * y2 * dradial + 6.0 * p1 * y + 2.0 * p2 * x;
+  }
+
+  // Newton from a nearby start; the same stopping rule as Camera::undistort's default
+  // (|distort(x) - xd| <= 1e-13). False when it does not converge fast or lands past the fold.
+  bool invert(double tx, double ty, double& x, double& y) const {
+    for (int it = 0; it < 12; ++it) {
+      double fx, fy, a, b, c, d;
+      evaluate(x, y, tx, ty, fx, fy, a, b, c, d);
+      // The domain test of core's InverseDistortion: inside the turning radius, det J > 0.
+      if (fx * fx + fy * fy <= 1e-26) return x * x + y * y < r2_max && a * d - b * c > 0;
+      const double det = a * d - b * c;
+      if (!(std::abs(det) > 1e-12)) return false;
+      const double inv_det = 1.0 / det;
+      x -= (d * fx - b * fy) * inv_det;
+      y -= (a * fy - c * fx) * inv_det;
+    }
+    return false;
+  }
+
+  // Jacobian only (for the warm start of the next solve).
+  void jacobian(double x, double y, double& a, double& b, double& c, double& d) const {
+    double fx, fy;
+    evaluate(x, y, 0, 0, fx, fy, a, b, c, d);
+  }
+};
+
+// Pixel -> ideal normalized coordinates: pixel-to-normalized through K^-1 (skew included).
+struct Intrinsics {
+  double inv_fx, inv_fy, cx, cy, skew;
+  explicit Intrinsics(const Camera& c)
+      : inv_fx(1.0 / c.fx), inv_fy(1.0 / c.fy), cx(c.cx), cy(c.cy), skew(c.skew) {}
+  void toNormalized(double u, double v, double& xd, double& yd) const {
+    yd = (v - cy) * inv_fy;
+    xd = (u - cx - skew * yd) * inv_fx;
+  }
+};
+
+// A solved point and the inverse Jacobian there: the first-order start for nearby points.
+struct Start {
+  bool ok = false;
+  double x = 0, y = 0, xd = 0, yd = 0;
+  double i00 = 0, i01 = 0, i10 = 0, i11 = 0;
+};
+
+inline Start makeStart(const Brown& brown, double x, double y, double xd, double yd) {
+  Start s;
+  double a, b, c, d;
+  brown.jacobian(x, y, a, b, c, d);
+  const double det = a * d - b * c;
+  if (!(std::abs(det) > 1e-12)) return s;
+  const double inv_det = 1.0 / det;
+  s = {true, x, y, xd, yd, d * inv_det, -b * inv_det, -c * inv_det, a * inv_det};
+  return s;
+}
+
+// Solves the inverse for the distorted point (xd, yd): first-order step from a nearby solved
+// point, then Newton to convergence (usually one step). Falls back to a cold start and then to
+// Camera::undistort (the reference) when the warm start fails.
+inline bool invertFrom(const Camera& camera, const Brown& brown, double xd, double yd,
+                       const Start& start, double& x, double& y) {
+  if (start.ok) {
+    const double ex = xd - start.xd, ey = yd - start.yd;
+    x = start.x + start.i00 * ex + start.i01 * ey;
+    y = start.y + start.i10 * ex + start.i11 * ey;
+    if (brown.invert(xd, yd, x, y)) return true;
+  }
+  x = xd;
+  y = yd;
+  if (brown.invert(xd, yd, x, y)) return true;
+  const InverseResult r = camera.undistort(Eigen::Vector2d(xd, yd));
+  if (!r.ok() || !camera.inInvertibleDomain(r.point)) return false;
+  x = r.point.x();
+  y = r.point.y();
+  return true;
+}
+
+// What one pixel needs from the scene, shared by renderView and renderLinear.
+struct PixelResult {
+  Eigen::Vector3d rgb_sum = Eigen::Vector3d::Zero();
+  float depth = kInf;
+  ObjectClass cls = ObjectClass::kNone;
+  bool centre_ok = false;
+};
+
+struct Instant {
+  const Scene* scene;
+  Eigen::Matrix3d R;  // world <- camera
+  Eigen::Vector3d origin;
+};
+
+std::vector<Instant> makeInstants(const std::vector<ShutterSample>& shutter) {
+  std::vector<Instant> out;
+  out.reserve(shutter.size());
+  for (const ShutterSample& s : shutter) {
+    if (s.scene == nullptr) fail("shutter", "has an instant without a scene");
+    out.push_back({s.scene, s.T_world_cam.rotation(), s.T_world_cam.translation()});
+  }
+  if (out.empty()) fail("shutter", "is empty");
+  return out;
+}
+
+// The per-row kernel: samples + (optionally) the truth ray of every pixel of row v.
+template <typename PixelSink>
+void renderRow(const Camera& camera, const Brown& brown, const Intrinsics& k,
+               const std::vector<Eigen::Vector2d>& pattern, const std::vector<Instant>& instants,
+               const Instant& centre, bool truth, int v, PixelSink&& sink) {
+  const int n_instants = static_cast<int>(instants.size());
+  const int spp = static_cast<int>(pattern.size());
+  Start start;  // the previous pixel's centre: warm start along the row
+  for (int u = 0; u < camera.width; ++u) {
+    PixelResult result;
+    double xd_c, yd_c, x_c = 0, y_c = 0;
+    k.toNormalized(u, v, xd_c, yd_c);
+    result.centre_ok = invertFrom(camera, brown, xd_c, yd_c, start, x_c, y_c);
+    start = result.centre_ok ? makeStart(brown, x_c, y_c, xd_c, yd_c) : Start{};
+    if (truth && result.centre_ok) {
+      const double inv = 1.0 / std::sqrt(x_c * x_c + y_c * y_c + 1.0);
+      const Eigen::Vector3d d_cam(x_c * inv, y_c * inv, inv);
+      Ray ray{centre.origin, centre.R * d_cam};
+      Hit hit;
+      if (centre.scene->trace(ray, hit)) {
+        result.depth = static_cast<float>(hit.t * d_cam.z());
+        result.cls = hit.cls;
+      }
+    }
+    int instant = (u + 2 * v) % n_instants;
+    for (int s = 0; s < spp; ++s, instant = instant + 1 == n_instants ? 0 : instant + 1) {
+      double xd, yd, x, y;
+      k.toNormalized(u + pattern[s].x(), v + pattern[s].y(), xd, yd);
+      if (!invertFrom(camera, brown, xd, yd, start, x, y)) {
+        continue;  // past the fold: no light reaches this part of the sensor
+      }
+      const Instant& in = instants[instant];
+      const double inv = 1.0 / std::sqrt(x * x + y * y + 1.0);
+      const Eigen::Vector3d d_cam(x * inv, y * inv, inv);
+      Ray ray{in.origin, in.R * d_cam};
+      Hit hit;
+      in.scene->trace(ray, hit);
+      result.rgb_sum += hit.rgb.cast<double>();
+    }
+    sink(u, result);
+  }
+}
+
+// Separable Gaussian on a float image (any channel count), clamp-to-edge borders. Each output
+// value is a fixed-order sum, so the result does not depend on the thread count.
+cv::Mat gaussianBlur(const cv::Mat& src, double sigma, int threads) {
+  const int radius = std::max(1, static_cast<int>(std::ceil(4.0 * sigma)));
+  std::vector<float> kernel(2 * radius + 1);
+  double sum = 0;
+  for (int i = -radius; i <= radius; ++i) {
+    kernel[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
+    sum += kernel[i + radius];
+  }
+  for (float& w : kernel) w = static_cast<float>(w / sum);
+  const int rows = src.rows, cols = src.cols, ch = src.channels();
+  cv::Mat tmp(src.size(), src.type()), dst(src.size(), src.type());
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int v = 0; v < rows; ++v) {
+    const float* in = src.ptr<float>(v);
+    float* out = tmp.ptr<float>(v);
+    for (int u = 0; u < cols; ++u) {
+      for (int c = 0; c < ch; ++c) {
+        float acc = 0;
+        for (int i = -radius; i <= radius; ++i) {
+          const int uu = std::clamp(u + i, 0, cols - 1);
+          acc += kernel[i + radius] * in[uu * ch + c];
+        }
+        out[u * ch + c] = acc;
+      }
+    }
+  }
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int v = 0; v < rows; ++v) {
+    float* out = dst.ptr<float>(v);
+    for (int x = 0; x < cols * ch; ++x) out[x] = 0;
+    for (int i = -radius; i <= radius; ++i) {
+      const float* in = tmp.ptr<float>(std::clamp(v + i, 0, rows - 1));
+      const float w = kernel[i + radius];
+      for (int x = 0; x < cols * ch; ++x) out[x] += w * in[x];
+    }
+  }
+  return dst;
+}
+
+// sRGB encoding table: 8192 intervals over [0, 1], linear interpolation. Worst error about
+// 0.004 grey levels (near the knee at 0.0031), far below the 8-bit step.
+class SrgbTable {
+ public:
+  static constexpr int kSize = 8192;
+  SrgbTable() {
+    for (int i = 0; i <= kSize; ++i) {
+      table_[i] = static_cast<float>(255.0 * srgbEncode(static_cast<double>(i) / kSize));
+    }
+  }
+  float encode255(float linear) const {
+    if (!(linear > 0.0f)) return 0.0f;
+    if (linear >= 1.0f) return table_[kSize];
+    const float x = linear * kSize;
+    const int i = static_cast<int>(x);
+    const float f = x - static_cast<float>(i);
+    return table_[i] + f * (table_[i + 1] - table_[i]);
+  }
+
+ private:
+  std::array<float, kSize + 1> table_;
+};
+
+const SrgbTable& srgbTable() {
+  static const SrgbTable table;
+  return table;
+}
+
+}  // namespace
+
+void RenderOptions::validate() const {
+  if (samples_per_pixel < 4) {
+    fail("samples_per_pixel", "must be >= 4 (got " + std::to_string(samples_per_pixel) + ")");
+  }
+  if (samples_per_pixel > 4096) {
+    fail("samples_per_pixel", "must be <= 4096 (got " + std::to_string(samples_per_pixel) + ")");
+  }
+  if (!(gain > 0) || !std::isfinite(gain)) fail("gain", "must be > 0 (got " + std::to_string(gain) + ")");
+  if (!(blur_sigma_px >= 0) || !std::isfinite(blur_sigma_px)) {
+    fail("blur_sigma_px", "must be >= 0 (got " + std::to_string(blur_sigma_px) + ")");
+  }
+  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma)) {
+    fail("noise_sigma", "must be >= 0 (got " + std::to_string(noise_sigma) + ")");
+  }
+  if (threads < 0) fail("threads", "must be >= 0 (got " + std::to_string(threads) + ")");
+}
+
+std::vector<Eigen::Vector2d> samplePattern(int samples_per_pixel) {
+  const int n_samples = samples_per_pixel;
+  std::vector<Eigen::Vector2d> pattern;
+  pattern.reserve(n_samples);
+  const int n = static_cast<int>(std::lround(std::sqrt(static_cast<double>(n_samples))));
+  if (n * n == n_samples) {
+    // Chiu, Shirley & Wang 1994 (multi-jittered), canonical arrangement without the jitter.
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        const double x = (i + (j + 0.5) / n) / n;
+        const double y = (j + (i + 0.5) / n) / n;
+        pattern.emplace_back(x - 0.5, y - 0.5);
+      }
+    }
+  } else {
+    for (int k = 0; k < n_samples; ++k) {
+      double y = 0, f = 0.5;
+      for (unsigned b = static_cast<unsigned>(k); b; b >>= 1, f *= 0.5) y += f * (b & 1u);
+      pattern.emplace_back((k + 0.5) / n_samples - 0.5, y + 0.5 / n_samples - 0.5);
+    }
+  }
+  return pattern;
+}
+
+double srgbEncode(double linear) {
+  if (!(linear > 0)) return 0;
+  if (linear >= 1) return 1;
+  return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+}
+
+double srgbDecode(double encoded) {
+  if (!(encoded > 0)) return 0;
+  if (encoded >= 1) return 1;
+  return encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4);
+}
+
+bool pixelRay(const Camera& camera, const Eigen::Vector2d& px, Eigen::Vector3d& dir_cam) {
+  const Brown brown(camera);
+  const Intrinsics k(camera);
+  double xd, yd, x, y;
+  k.toNormalized(px.x(), px.y(), xd, yd);
+  if (!invertFrom(camera, brown, xd, yd, Start{}, x, y)) return false;
+  dir_cam = Eigen::Vector3d(x, y, 1.0).normalized();
+  return true;
+}
+
+RenderedView renderView(const Camera& camera, const Pose& T_world_cam, const Scene& scene,
+                        const RenderOptions& options) {
+  const ShutterSample instant{&scene, T_world_cam};
+  return renderView(camera, std::vector<ShutterSample>{instant}, instant, options);
+}
+
+RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& shutter,
+                        const ShutterSample& centre, const RenderOptions& options) {
+  options.validate();
+  camera.validate();
+  if (centre.scene == nullptr) fail("centre", "has no scene");
+  const std::vector<Instant> instants = makeInstants(shutter);
+  const Instant centre_instant{centre.scene, centre.T_world_cam.rotation(),
+                               centre.T_world_cam.translation()};
+  const std::vector<Eigen::Vector2d> pattern = samplePattern(options.samples_per_pixel);
+  const Brown brown(camera);
+  const Intrinsics k(camera);
+  const int threads = threadCount(options.threads);
+  const int W = camera.width, H = camera.height;
+  const float scale = static_cast<float>(options.gain / pattern.size());
+
+  RenderedView view;
+  cv::Mat linear(H, W, CV_32FC3);  // R, G, B
+  if (options.truth) {
+    view.depth.create(H, W, CV_32FC1);
+    view.labels.create(H, W, CV_8UC1);
+    view.mask.create(H, W, CV_8UC1);
+  }
+  int not_invertible = 0;
+#pragma omp parallel for schedule(dynamic, 2) num_threads(threads) reduction(+ : not_invertible)
+  for (int v = 0; v < H; ++v) {
+    float* rgb = linear.ptr<float>(v);
+    float* depth = options.truth ? view.depth.ptr<float>(v) : nullptr;
+    std::uint8_t* labels = options.truth ? view.labels.ptr<std::uint8_t>(v) : nullptr;
+    std::uint8_t* mask = options.truth ? view.mask.ptr<std::uint8_t>(v) : nullptr;
+    renderRow(camera, brown, k, pattern, instants, centre_instant, options.truth, v,
+              [&](int u, const PixelResult& p) {
+                rgb[3 * u + 0] = static_cast<float>(p.rgb_sum.x()) * scale;
+                rgb[3 * u + 1] = static_cast<float>(p.rgb_sum.y()) * scale;
+                rgb[3 * u + 2] = static_cast<float>(p.rgb_sum.z()) * scale;
+                if (!p.centre_ok) ++not_invertible;
+                if (depth != nullptr) {
+                  depth[u] = p.depth;
+                  labels[u] = static_cast<std::uint8_t>(p.cls);
+                  mask[u] = p.cls == ObjectClass::kActor ? 255 : 0;
+                }
+              });
+  }
+  view.not_invertible = not_invertible;
+
+  if (options.blur_sigma_px > 0) linear = gaussianBlur(linear, options.blur_sigma_px, threads);
+
+  const SrgbTable& table = srgbTable();
+  view.bgr.create(H, W, CV_8UC3);
+  const double noise = options.noise_sigma;
+  const std::uint64_t stream =
+      hashKey(options.seed, static_cast<std::uint64_t>(options.camera_index),
+              static_cast<std::uint64_t>(options.frame));
+  // Round half up after clamping to [0, 255]: the truncation of a non-negative value is its floor.
+  auto quantize = [](double value) {
+    return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0) + 0.5);
+  };
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int v = 0; v < H; ++v) {
+    const float* rgb = linear.ptr<float>(v);
+    std::uint8_t* bgr = view.bgr.ptr<std::uint8_t>(v);
+    if (noise > 0) {
+      for (int u = 0; u < W; ++u) {
+        const std::uint64_t pixel = static_cast<std::uint64_t>(v) * W + u;
+        for (int c = 0; c < 3; ++c) {
+          const double value = table.encode255(rgb[3 * u + c]) +
+                               noise * normalFromKey(hashKey(stream, pixel, c));
+          bgr[3 * u + (2 - c)] = quantize(value);
+        }
+      }
+    } else {
+      for (int u = 0; u < W; ++u) {
+        for (int c = 0; c < 3; ++c) bgr[3 * u + (2 - c)] = quantize(table.encode255(rgb[3 * u + c]));
+      }
+    }
+  }
+  return view;
+}
+
+LinearView renderLinear(const Camera& camera, const std::vector<ShutterSample>& shutter,
+                        const ShutterSample& centre, int samples_per_pixel, int threads) {
+  RenderOptions check;
+  check.samples_per_pixel = samples_per_pixel;
+  check.threads = threads;
+  check.validate();
+  camera.validate();
+  if (centre.scene == nullptr) fail("centre", "has no scene");
+  const std::vector<Instant> instants = makeInstants(shutter);
+  const Instant centre_instant{centre.scene, centre.T_world_cam.rotation(),
+                               centre.T_world_cam.translation()};
+  const std::vector<Eigen::Vector2d> pattern = samplePattern(samples_per_pixel);
+  const Brown brown(camera);
+  const Intrinsics k(camera);
+  const int W = camera.width, H = camera.height;
+  const float scale = 1.0f / static_cast<float>(pattern.size());
+
+  LinearView view;
+  view.rgb.create(H, W, CV_32FC3);
+  view.depth.create(H, W, CV_32FC1);
+#pragma omp parallel for schedule(dynamic, 2) num_threads(threadCount(threads))
+  for (int v = 0; v < H; ++v) {
+    float* rgb = view.rgb.ptr<float>(v);
+    float* depth = view.depth.ptr<float>(v);
+    renderRow(camera, brown, k, pattern, instants, centre_instant, true, v,
+              [&](int u, const PixelResult& p) {
+                rgb[3 * u + 0] = static_cast<float>(p.rgb_sum.x()) * scale;
+                rgb[3 * u + 1] = static_cast<float>(p.rgb_sum.y()) * scale;
+                rgb[3 * u + 2] = static_cast<float>(p.rgb_sum.z()) * scale;
+                depth[u] = p.depth;
+              });
+  }
+  return view;
+}
+
+}  // namespace previz::synth

@@ -1,0 +1,493 @@
+#include "datasets/synth.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/board.h"
+#include "core/distortion_maps.h"
+#include "core/error.h"
+#include "core/io.h"
+#include "core/rig.h"
+#include "datasets/random.h"
+#include "datasets/render.h"
+#include "datasets/rigs.h"
+#include "datasets/studio.h"
+
+namespace previz::synth {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+constexpr int kTakeFormatVersion = 1;
+constexpr std::uint64_t kStreamGain = 401;
+
+[[noreturn]] void badOption(const std::string& field, const std::string& message) {
+  ErrorContext context;
+  context.field = field;
+  throw Error("synth: " + field + " " + message, context);
+}
+
+template <typename T>
+std::string str(T value) {
+  std::ostringstream s;
+  s << value;
+  return s.str();
+}
+
+BoardType boardTypeFromString(const std::string& name) {
+  if (name == "chessboard") return BoardType::kChessboard;
+  if (name == "charuco") return BoardType::kCharuco;
+  if (name == "aprilgrid") return BoardType::kAprilGrid;
+  if (name == "circles") return BoardType::kCircles;
+  badOption("board", "must be chessboard|charuco|aprilgrid|circles (got '" + name + "')");
+}
+
+std::string frameFile(int frame, const char* extension) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%06d.%s", frame, extension);
+  return name;
+}
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// The instants a frame's shutter averages: 'count' times centred on the frame time, spread over
+// shutter / fps seconds (one instant, the frame time itself, when the shutter is 0).
+std::vector<double> shutterTimes(double frame_time_s, const SynthOptions& o) {
+  if (o.shutter <= 0) return {frame_time_s};
+  const int count = 4;
+  std::vector<double> times;
+  for (int i = 0; i < count; ++i) {
+    times.push_back(frame_time_s + o.shutter / o.fps * ((i + 0.5) / count - 0.5));
+  }
+  return times;
+}
+
+// Appends lines of a .jsonl file in memory; written once at the end of the take.
+struct JsonLines {
+  std::string text;
+  void add(const nlohmann::json& j) { text += j.dump() + "\n"; }
+};
+
+nlohmann::json optionsToJson(const SynthOptions& o) {
+  return {{"preset", toString(o.preset)},
+          {"frames", o.frames},
+          {"witness_cameras", o.witness_cameras},
+          {"seed", o.seed},
+          {"witness_width", o.witness_width},
+          {"witness_height", o.witness_height},
+          {"main_width", o.main_width},
+          {"main_height", o.main_height},
+          {"fps", o.fps},
+          {"samples_per_pixel", o.samples_per_pixel},
+          {"noise_sigma", o.noise_sigma},
+          {"blur_sigma_px", o.blur_sigma_px},
+          {"shutter", o.shutter},
+          {"brightness_jitter", o.brightness_jitter},
+          {"main_dolly", o.main_dolly},
+          {"cg_overscan", o.cg_overscan},
+          {"board", o.board},
+          {"camera", o.camera},
+          {"write_meshes", o.write_meshes}};
+}
+
+nlohmann::json propsToJson(const std::vector<PropSpec>& props) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const PropSpec& p : props) {
+    nlohmann::json tags = nlohmann::json::array();
+    for (const PropTag& t : p.tags) {
+      tags.push_back({{"family", t.family},
+                      {"id", t.id},
+                      {"size_m", t.size_m},
+                      {"T_prop_tag", poseToJson(t.T_prop_tag)}});
+    }
+    list.push_back({{"id", p.id},
+                    {"name", p.name},
+                    {"box_size_m", {p.box_size_m.x(), p.box_size_m.y(), p.box_size_m.z()}},
+                    {"tags", tags}});
+  }
+  return {{"units", "m"},
+          {"prop_frame", "origin at the box centre, axes along the box edges"},
+          {"tag_frame",
+           "origin at the tag centre, x right and y down as the tag is read, z into the tag; "
+           "size_m is the edge of the outer black border (libapriltag tagsize)"},
+          {"props", list}};
+}
+
+// A camera of the take with what the renderer needs to know about it.
+struct TakeCamera {
+  RigCamera rig;
+  int index = 0;      // position in the take's camera list (noise stream)
+  double gain = 1.0;  // brightness of this camera
+  bool moving = false;  // main camera on the dolly
+};
+
+}  // namespace
+
+const char* toString(Preset preset) {
+  switch (preset) {
+    case Preset::kStudio: return "studio";
+    case Preset::kIntrinsics: return "intrinsics";
+    case Preset::kRig: return "rig";
+  }
+  return "unknown";
+}
+
+Preset presetFromString(const std::string& name) {
+  if (name == "studio") return Preset::kStudio;
+  if (name == "intrinsics") return Preset::kIntrinsics;
+  if (name == "rig") return Preset::kRig;
+  badOption("preset", "must be studio|intrinsics|rig (got '" + name + "')");
+}
+
+void SynthOptions::validate() const {
+  if (preset != Preset::kStudio && preset != Preset::kIntrinsics && preset != Preset::kRig) {
+    badOption("preset", "is not a known preset (" + str(static_cast<int>(preset)) + ")");
+  }
+  if (frames <= 0) badOption("frames", "must be > 0 (got " + str(frames) + ")");
+  if (witness_cameras < 1 || witness_cameras > 99) {
+    badOption("witness_cameras", "must be in [1, 99] (got " + str(witness_cameras) + ")");
+  }
+  if (witness_width <= 0) badOption("witness_width", "must be > 0 (got " + str(witness_width) + ")");
+  if (witness_height <= 0) {
+    badOption("witness_height", "must be > 0 (got " + str(witness_height) + ")");
+  }
+  if (main_width <= 0) badOption("main_width", "must be > 0 (got " + str(main_width) + ")");
+  if (main_height <= 0) badOption("main_height", "must be > 0 (got " + str(main_height) + ")");
+  if (!(fps > 0) || !std::isfinite(fps)) badOption("fps", "must be > 0 (got " + str(fps) + ")");
+  if (samples_per_pixel < 4 || samples_per_pixel > 4096) {
+    badOption("samples_per_pixel", "must be in [4, 4096] (got " + str(samples_per_pixel) + ")");
+  }
+  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma)) {
+    badOption("noise_sigma", "must be >= 0 (got " + str(noise_sigma) + ")");
+  }
+  if (!(blur_sigma_px >= 0) || !(blur_sigma_px <= 50)) {
+    badOption("blur_sigma_px", "must be in [0, 50] (got " + str(blur_sigma_px) + ")");
+  }
+  if (!(shutter >= 0) || !(shutter <= 1)) {
+    badOption("shutter", "must be in [0, 1] (got " + str(shutter) + ")");
+  }
+  if (!(brightness_jitter >= 0) || !(brightness_jitter < 1)) {
+    badOption("brightness_jitter", "must be in [0, 1) (got " + str(brightness_jitter) + ")");
+  }
+  if (!(cg_overscan >= 0) || !(cg_overscan <= 1)) {
+    badOption("cg_overscan", "must be in [0, 1] (got " + str(cg_overscan) + ")");
+  }
+  boardTypeFromString(board);
+  if (camera != "main" && camera != "witness") {
+    badOption("camera", "must be main|witness (got '" + camera + "')");
+  }
+  if (threads < 0) badOption("threads", "must be >= 0 (got " + str(threads) + ")");
+}
+
+SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
+                            const std::function<void(const SynthProgress&)>& progress) {
+  options.validate();
+  const Clock::time_point take_start = Clock::now();
+  const SynthOptions& o = options;
+  const bool studio_preset = o.preset == Preset::kStudio;
+  const bool board_preset = !studio_preset;
+  const double duration_s = o.frames / o.fps;
+
+  // The studio's choreography runs at walking pace over at least its default length; a short
+  // take is a clip of it (the actor moves at a realistic speed), a long one stretches it.
+  StudioConfig config;
+  config.seed = o.seed;
+  config.take_duration_s = std::max(StudioConfig{}.take_duration_s, duration_s);
+  config.with_actor = studio_preset;
+  config.with_prop = studio_preset;
+  const Studio studio(config);
+
+  const BoardType board_type = boardTypeFromString(o.board);
+  const BoardSpec board_spec =
+      o.preset == Preset::kRig ? rigBoard(board_type) : defaultBoard(board_type);
+
+  // The take's cameras. The main camera only moves in the studio preset: calibration takes
+  // assume a static rig.
+  StudioRigOptions rig_options;
+  rig_options.witness_cameras = o.witness_cameras;
+  rig_options.seed = o.seed;
+  rig_options.witness_width = o.witness_width;
+  rig_options.witness_height = o.witness_height;
+  rig_options.main_width = o.main_width;
+  rig_options.main_height = o.main_height;
+  const bool dolly = studio_preset && o.main_dolly;
+  // The dolly runs on the choreography's clock too, so camera and actor move at the same
+  // (realistic) speeds whatever the take's length.
+  Rig full_rig = studioRig(rig_options, config.take_duration_s, dolly);
+  Rig rig;
+  if (o.preset == Preset::kIntrinsics) {
+    rig.cameras.push_back(o.camera == "main" ? full_rig.cameras.back() : full_rig.cameras.front());
+  } else {
+    rig = full_rig;
+  }
+  std::vector<TakeCamera> cameras;
+  for (size_t i = 0; i < rig.cameras.size(); ++i) {
+    TakeCamera c;
+    c.rig = rig.cameras[i];
+    c.index = static_cast<int>(i);
+    Rng gain_rng(hashKey(o.seed, kStreamGain, static_cast<std::uint64_t>(i)));
+    c.gain = 1.0 + o.brightness_jitter * gain_rng.uniform(-1.0, 1.0);
+    c.moving = dolly && c.rig.role == "main";
+    cameras.push_back(c);
+  }
+  const TakeCamera* main_camera = nullptr;
+  for (const TakeCamera& c : cameras) {
+    if (c.rig.role == "main") main_camera = &c;
+  }
+
+  // Files known before rendering.
+  fs::create_directories(out);
+  writeRig(rig, out / "truth" / "rig.json");
+  std::vector<PropSpec> props;
+  if (studio_preset && config.with_prop) props.push_back(studio.prop());
+  writeJsonAtomic(out / "props.json", propsToJson(props));
+  if (board_preset) writeBoard(board_spec, out / "board.json");
+
+  Camera cg_camera;
+  if (main_camera != nullptr) {
+    cg_camera = idealPinhole(main_camera->rig.camera, o.cg_overscan);
+    cg_camera.name = "cg";
+  }
+
+  JsonLines main_poses, prop_poses;
+  std::map<std::string, JsonLines> board_lines;
+  nlohmann::json cg_frames = nlohmann::json::array();
+  std::vector<int> floor_frames;
+
+  double render_ms = 0, plate_ms = 0;
+  for (int f = 0; f < o.frames; ++f) {
+    const double t = f / o.fps;
+    const std::vector<double> times = board_preset ? std::vector<double>{t} : shutterTimes(t, o);
+    const std::string png = frameFile(f, "png");
+    const std::string exr = frameFile(f, "exr");
+
+    // Scenes of this frame: plate (what the cameras film) at every shutter instant plus the
+    // frame time itself (truth layers).
+    std::shared_ptr<const Primitive> board;
+    Pose T_world_board = Pose::Identity();
+    if (o.preset == Preset::kIntrinsics) {
+      const TakeCamera& c = cameras.front();
+      T_world_board =
+          c.rig.T_world_cam * intrinsicsBoardPose(c.rig.camera, board_spec, f, o.seed);
+    } else if (o.preset == Preset::kRig) {
+      T_world_board = rigBoardPose(board_spec, f, o.frames, o.seed);
+      if (isFloorBoardFrame(f, o.frames)) floor_frames.push_back(f);
+    }
+    if (board_preset) board = makeBoard(board_spec, T_world_board);
+    if (o.preset == Preset::kRig && isFloorBoardFrame(f, o.frames)) board = onTopOf(board);
+    const unsigned plate_layers = studio_preset ? kLayersPlate : unsigned{kLayerStage};
+    auto sceneAt = [&](double time_s, unsigned layers) {
+      Scene scene = studio.sceneAt(time_s, layers);
+      if (board) scene.add(board);
+      return scene;
+    };
+    const bool single_instant = times.size() == 1 && times[0] == t;
+    const Scene centre_scene = sceneAt(t, plate_layers);
+    std::vector<Scene> instant_scenes;
+    if (!single_instant) {
+      for (double ti : times) instant_scenes.push_back(sceneAt(ti, plate_layers));
+    }
+
+    auto poseAt = [&](const TakeCamera& c, double time_s) {
+      return c.moving ? mainCameraPose(time_s, config.take_duration_s, true) : c.rig.T_world_cam;
+    };
+    auto shutterFor = [&](const TakeCamera& c, const std::vector<Scene>& scenes,
+                          const Scene& centre) {
+      std::vector<ShutterSample> shutter;
+      if (single_instant) {
+        shutter.push_back({&centre, poseAt(c, t)});
+      } else {
+        for (size_t i = 0; i < times.size(); ++i) {
+          shutter.push_back({&scenes[i], poseAt(c, times[i])});
+        }
+      }
+      return shutter;
+    };
+
+    for (const TakeCamera& c : cameras) {
+      const std::string& name = c.rig.camera.name;
+      RenderOptions ro;
+      ro.samples_per_pixel = o.samples_per_pixel;
+      ro.gain = c.gain;
+      ro.blur_sigma_px = o.blur_sigma_px;
+      ro.noise_sigma = o.noise_sigma;
+      ro.seed = o.seed;
+      ro.camera_index = c.index;
+      ro.frame = f;
+      ro.threads = o.threads;
+      const Clock::time_point start = Clock::now();
+      const ShutterSample centre{&centre_scene, poseAt(c, t)};
+      const RenderedView view =
+          renderView(c.rig.camera, shutterFor(c, instant_scenes, centre_scene), centre, ro);
+      const double ms = msSince(start);
+      plate_ms += ms;
+      render_ms += ms;
+      writeImageAtomic(out / "cams" / name / png, view.bgr);
+      writeDepthExr(out / "truth" / "depth" / name / exr, view.depth,
+                    {{"previz:camera", name}, {"previz:frame", std::to_string(f)}});
+      writeImageAtomic(out / "truth" / "masks" / name / png, view.mask);
+      writeImageAtomic(out / "truth" / "labels" / name / png, view.labels);
+
+      if (board_preset) {
+        nlohmann::json points = nlohmann::json::array();
+        for (const BoardObservation& b : visibleBoardPoints(c.rig.camera, centre.T_world_cam,
+                                                            board_spec, T_world_board,
+                                                            centre_scene)) {
+          points.push_back({{"id", b.id}, {"x", b.px.x()}, {"y", b.px.y()}});
+        }
+        board_lines[name].add({{"frame", f},
+                               {"time_s", t},
+                               {"floor", o.preset == Preset::kRig && isFloorBoardFrame(f, o.frames)},
+                               {"T_world_board", poseToJson(T_world_board)},
+                               {"points", points}});
+      }
+    }
+
+    if (main_camera != nullptr) {
+      main_poses.add({{"frame", f},
+                      {"time_s", t},
+                      {"T_world_cam", poseToJson(poseAt(*main_camera, t))}});
+    }
+
+    if (studio_preset) {
+      // CG set through the ideal pinhole of the main camera (the engine's render).
+      const Scene cg_centre = studio.sceneAt(t, kLayerCg);
+      std::vector<Scene> cg_scenes;
+      if (!single_instant) {
+        for (double ti : times) cg_scenes.push_back(studio.sceneAt(ti, kLayerCg));
+      }
+      Clock::time_point start = Clock::now();
+      const LinearView cg =
+          renderLinear(cg_camera, shutterFor(*main_camera, cg_scenes, cg_centre),
+                       {&cg_centre, poseAt(*main_camera, t)}, o.samples_per_pixel, o.threads);
+      render_ms += msSince(start);
+      ExrImage color;
+      color.image = cg.rgb;
+      color.channels = {"R", "G", "B"};
+      color.attributes = {{"previz:color", "linear RGB (scene-referred), no gain, no encoding"},
+                          {"previz:pixel_origin", "pixel (0,0) is the centre of the top-left pixel"},
+                          {"previz:camera", "cg (ideal pinhole of main, see cg/camera.json)"},
+                          {"previz:frame", std::to_string(f)}};
+      writeExr(out / "cg" / "color" / exr, color);
+      writeDepthExr(out / "cg" / "depth" / exr, cg.depth,
+                    {{"previz:camera", "cg"}, {"previz:frame", std::to_string(f)}});
+      cg_frames.push_back({{"frame", f},
+                           {"time_s", t},
+                           {"T_world_cam", poseToJson(poseAt(*main_camera, t))}});
+
+      // The true composite: the main camera's real lens seeing actor + prop + CG set, no stage.
+      const unsigned comp_layers = kLayerActor | kLayerProp | kLayerCg;
+      const Scene comp_centre = studio.sceneAt(t, comp_layers);
+      std::vector<Scene> comp_scenes;
+      if (!single_instant) {
+        for (double ti : times) comp_scenes.push_back(studio.sceneAt(ti, comp_layers));
+      }
+      RenderOptions ro;
+      ro.samples_per_pixel = o.samples_per_pixel;
+      ro.gain = main_camera->gain;
+      ro.truth = false;
+      ro.threads = o.threads;
+      start = Clock::now();
+      const RenderedView comp =
+          renderView(main_camera->rig.camera, shutterFor(*main_camera, comp_scenes, comp_centre),
+                     {&comp_centre, poseAt(*main_camera, t)}, ro);
+      render_ms += msSince(start);
+      writeImageAtomic(out / "truth" / "composite" / png, comp.bgr);
+
+      if (config.with_prop) {
+        prop_poses.add({{"frame", f},
+                        {"time_s", t},
+                        {"props",
+                         {{{"id", studio.prop().id},
+                           {"T_world_prop", poseToJson(studio.T_world_prop(t))}}}}});
+      }
+      if (o.write_meshes && config.with_actor) {
+        const TriangleMesh mesh = studio.actorMesh(t);
+        char stem[32];
+        std::snprintf(stem, sizeof(stem), "actor.%06d", f);
+        writePly(mesh, out / "truth" / "mesh" / (std::string(stem) + ".ply"));
+        writeObj(mesh, out / "truth" / "mesh" / (std::string(stem) + ".obj"));
+      }
+    }
+
+    if (progress) {
+      SynthProgress p;
+      p.frames_done = f + 1;
+      p.frames_total = o.frames;
+      p.elapsed_s = msSince(take_start) / 1000.0;
+      progress(p);
+    }
+  }
+
+  // Per-frame truth collected over the take.
+  if (main_camera != nullptr) {
+    writeFileAtomic(out / "truth" / "main_poses.jsonl", main_poses.text);
+  }
+  if (studio_preset) {
+    writeFileAtomic(out / "truth" / "props.jsonl", prop_poses.text);
+    writeJsonAtomic(out / "cg" / "camera.json",
+                    {{"camera", cameraToJson(cg_camera)},
+                     {"lens_camera", main_camera->rig.camera.name},
+                     {"overscan", o.cg_overscan},
+                     {"pixel_origin", "pixel (0,0) is the centre of the top-left pixel"},
+                     {"pose", "T_world_cam of each frame equals the main camera's "
+                              "(truth/main_poses.jsonl)"},
+                     {"frames", cg_frames}});
+  }
+  for (const auto& [name, lines] : board_lines) {
+    writeFileAtomic(out / "truth" / "boards" / (name + ".jsonl"), lines.text);
+  }
+  if (o.preset == Preset::kRig) {
+    writeJsonAtomic(out / "truth" / "board_frames.json",
+                    {{"floor_frames", floor_frames},
+                     {"T_world_board", poseToJson(floorBoardPose())},
+                     {"note",
+                      "in floor frames the board lies face up with its board-frame origin at the "
+                      "world origin: board x = world x, board y = -world y, board z = -world z"}});
+  }
+
+  // take.json last: its presence marks a complete take.
+  nlohmann::json names = nlohmann::json::array();
+  nlohmann::json gains = nlohmann::json::object();
+  for (const TakeCamera& c : cameras) {
+    names.push_back(c.rig.camera.name);
+    gains[c.rig.camera.name] = c.gain;
+  }
+  nlohmann::json take = {{"format", "previz synthetic take"},
+                         {"format_version", kTakeFormatVersion},
+                         {"previz_version", PREVIZ_VERSION},
+                         {"preset", toString(o.preset)},
+                         {"seed", o.seed},
+                         {"fps", o.fps},
+                         {"frames", o.frames},
+                         {"frame_pattern", "%06d"},
+                         {"duration_s", duration_s},
+                         {"choreography_duration_s", config.take_duration_s},
+                         {"cameras", names},
+                         {"camera_gains", gains},
+                         {"shutter_instants", board_preset ? 1 : static_cast<int>(shutterTimes(0, o).size())},
+                         {"options", optionsToJson(o)}};
+  if (board_preset) take["board"] = o.board;
+  writeJsonAtomic(out / "take.json", take);
+
+  SynthSummary summary;
+  summary.frames = o.frames;
+  summary.cameras = static_cast<int>(cameras.size());
+  summary.render_ms = render_ms;
+  summary.ms_per_camera_frame = plate_ms / (static_cast<double>(o.frames) * cameras.size());
+  summary.out = out;
+  return summary;
+}
+
+}  // namespace previz::synth

@@ -1,0 +1,60 @@
+#pragma once
+// The synthetic studio's public entry point: renders a take folder plus truth/.
+// Layout of what it writes: docs/formats.md ("Synthetic take").
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+
+namespace previz::synth {
+
+enum class Preset {
+  kStudio,      // actor + tagged prop on the green stage, N witness cameras + main camera, CG set
+  kIntrinsics,  // one camera, a calibration board moved and rotated in front of it
+  kRig,         // every camera, a board waved through the volume, then frames of a floor board
+};
+const char* toString(Preset preset);
+Preset presetFromString(const std::string& name);  // throws Error naming the value
+
+struct SynthOptions {
+  Preset preset = Preset::kStudio;
+  int frames = 24;
+  int witness_cameras = 8;
+  std::uint64_t seed = 1;
+  int witness_width = 1280, witness_height = 720;  // --size WxH sets these
+  int main_width = 1920, main_height = 1080;
+  double fps = 24.0;
+  int samples_per_pixel = 4;     // anti-aliasing samples (>= 4), stratified, fixed per seed
+  double noise_sigma = 0.0;      // additive Gaussian noise, grey levels (0..255)
+  double blur_sigma_px = 0.0;    // defocus blur (Gaussian sigma, pixels)
+  double shutter = 0.0;          // motion blur: fraction of the frame interval the shutter is open
+  double brightness_jitter = 0.0;  // per camera gain drawn in [1 - j, 1 + j]
+  bool main_dolly = true;        // main camera moves along its dolly path (else fixed)
+  double cg_overscan = 0.1;      // CG render of the main camera: extra fraction each way
+  std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles
+  std::string camera = "main";   // intrinsics preset: which camera ("main" or "witness")
+  bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
+  int threads = 0;               // OpenMP threads (0 = default)
+
+  void validate() const;  // throws Error naming the bad field
+};
+
+struct SynthProgress {
+  int frames_done = 0;
+  int frames_total = 0;
+  double elapsed_s = 0;
+};
+
+struct SynthSummary {
+  int frames = 0;
+  int cameras = 0;
+  double render_ms = 0;         // total time spent rendering
+  double ms_per_camera_frame = 0;
+  std::filesystem::path out;
+};
+
+// Renders the take into out (created; existing files are replaced atomically one by one).
+SynthSummary synthesizeTake(const SynthOptions& options, const std::filesystem::path& out,
+                            const std::function<void(const SynthProgress&)>& progress = {});
+
+}  // namespace previz::synth

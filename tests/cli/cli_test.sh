@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# CLI checks a user would do by hand: exit codes, error messages that name the culprit, and a
+# tiny synthetic take written completely (no temporary files left behind).
+#   cli_test.sh PREVIZ_BIN SHARED_DATA TMPDIR
+set -uo pipefail
+bin="$1"; data="$2"; tmp="$3"
+rm -rf "$tmp"; mkdir -p "$tmp"
+passed=0; failed=0
+ok()   { passed=$((passed + 1)); echo "ok: $1"; }
+fail() { failed=$((failed + 1)); echo "FAIL: $1"; }
+
+# expect_fail NAME REGEX CMD... : exit code must be non-zero and stderr must match REGEX
+expect_fail() {
+  local name="$1" re="$2"; shift 2
+  local err; err=$("$@" 2>&1 >/dev/null); local rc=$?
+  if [ $rc -ne 0 ] && grep -Eq -- "$re" <<<"$err"; then ok "$name"; else fail "$name (rc=$rc, stderr: $err)"; fi
+}
+
+expect_fail "unknown command fails" "nosuch|not expected|Extras" "$bin" nosuch
+expect_fail "frames 0 names the field" "frames" "$bin" synth --out "$tmp/x" --frames 0 --quiet
+expect_fail "bad size names the flag" "--size" "$bin" synth --out "$tmp/x" --size 0x5 --quiet
+expect_fail "unknown board names the field" "board" "$bin" synth --preset intrinsics --board nosuch --out "$tmp/x" --quiet
+printf '{"units": "m", "cameras": [ {"name": "a", "width": 10' > "$tmp/broken.json"
+expect_fail "malformed rig names the file" "broken.json" "$bin" camera info --rig "$tmp/broken.json"
+printf 'cam0 1 2 3\n' > "$tmp/short.txt"
+expect_fail "short KRt row names the file" "short.txt" "$bin" camera import --krt "$tmp/short.txt" --size 640x480 --out "$tmp/r.json"
+expect_fail "KRt without size names the flag" "--size" "$bin" camera import --krt "$tmp/short.txt" --out "$tmp/r.json"
+
+# A tiny studio take, then its files.
+if out=$("$bin" synth --preset studio --out "$tmp/take" --frames 2 --cams 3 --size 160x90 --json --quiet); then
+  grep -q '"frames":2' <<<"$out" && ok "synth --json summary" || fail "synth --json summary: $out"
+  for f in take.json props.json truth/rig.json truth/main_poses.jsonl truth/props.jsonl \
+           cams/main/000000.png cams/witness01/000001.png truth/depth/main/000000.exr \
+           truth/masks/witness03/000001.png truth/mesh/actor.000001.ply truth/mesh/actor.000001.obj \
+           truth/composite/000001.png cg/color/000000.exr cg/depth/000001.exr; do
+    [ -s "$tmp/take/$f" ] && ok "take has $f" || fail "take lacks $f"
+  done
+  leftovers=$(find "$tmp/take" -name '*.tmp*' | head -n 3)
+  [ -z "$leftovers" ] && ok "no temporary files left" || fail "temporary files left: $leftovers"
+  if "$bin" camera stmap --rig "$tmp/take/truth/rig.json" --camera main --overscan 0.1 --out "$tmp/st" --json >/dev/null 2>&1 \
+     && [ -s "$tmp/st/main_distort.exr" ] && [ -s "$tmp/st/main_undistort.exr" ]; then ok "camera stmap"; else fail "camera stmap"; fi
+  expect_fail "stmap of an unknown camera names it" "nosuchcam" "$bin" camera stmap --rig "$tmp/take/truth/rig.json" --camera nosuchcam --out "$tmp/st2"
+else
+  fail "synth studio take"
+fi
+
+# Another tool's cameras (Middlebury K R t rows) in and out.
+par="$data/middlebury-temple/templeSR_par.txt"
+if [ -f "$par" ]; then
+  if "$bin" camera import --krt "$par" --size 640x480 --out "$tmp/temple.json" >/dev/null 2>&1 \
+     && [ "$("$bin" camera info --rig "$tmp/temple.json" --json 2>/dev/null | grep -o '"name"' | wc -l)" -eq 16 ]; then
+    ok "import Middlebury K R t (16 cameras)"
+  else fail "import Middlebury K R t"; fi
+  if "$bin" camera export --rig "$tmp/temple.json" --opencv-dir "$tmp/yaml" >/dev/null 2>&1 \
+     && "$bin" camera import --opencv "$tmp"/yaml/*.yaml --out "$tmp/back.json" >/dev/null 2>&1; then
+    ok "export/import OpenCV YAML"
+  else fail "export/import OpenCV YAML"; fi
+else
+  fail "real data missing: $par"
+fi
+
+if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ]; then
+  ok "demo writes a contact sheet"
+else fail "demo"; fi
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

@@ -1,0 +1,161 @@
+// File I/O: atomic writes, image errors, EXR (float channels, attributes), depth with +inf.
+#include "core/io.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace previz {
+namespace {
+
+fs::path tmpDir(const std::string& name) {
+  const fs::path p = fs::path(PREVIZ_TEST_TMP) / "io_test" / name;
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p;
+}
+
+std::vector<std::string> folderEntries(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+TEST(Io, AtomicWriteCreatesParentsReplacesContentAndLeavesNoTemporary) {
+  const fs::path dir = tmpDir("atomic");
+  const fs::path p = dir / "a" / "b" / "file.txt";
+  writeFileAtomic(p, "first");
+  EXPECT_EQ(readTextFile(p), "first");
+  writeFileAtomic(p, std::string("second\0binary", 13));
+  EXPECT_EQ(readTextFile(p), std::string("second\0binary", 13));
+  EXPECT_EQ(folderEntries(dir / "a" / "b"), std::vector<std::string>{"file.txt"});
+}
+
+TEST(Io, FailedWriteLeavesTheOldFileUntouched) {
+  const fs::path dir = tmpDir("failed");
+  const fs::path p = dir / "keep.txt";
+  writeFileAtomic(p, "original");
+  // The target's place is taken by a non-empty folder: rename fails, the temp is cleaned up.
+  const fs::path blocked = dir / "blocked";
+  fs::create_directories(blocked / "inside");
+  EXPECT_THROW(writeFileAtomic(blocked, "x"), Error);
+  EXPECT_EQ(readTextFile(p), "original");
+  EXPECT_EQ(folderEntries(dir), (std::vector<std::string>{"blocked", "keep.txt"}));
+  try {
+    writeFileAtomic(blocked, "x");
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, blocked.string());
+  }
+}
+
+TEST(Io, ReadImageNamesTheFileWhenMissingOrCorrupt) {
+  const fs::path dir = tmpDir("images");
+  cv::Mat img(32, 48, CV_8UC3);
+  cv::randu(img, 0, 255);
+  writeImageAtomic(dir / "ok.png", img);
+  const cv::Mat back = readImage(dir / "ok.png");
+  EXPECT_EQ(cv::norm(back, img, cv::NORM_INF), 0.0);
+
+  try {
+    readImage(dir / "missing.png");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, (dir / "missing.png").string());
+    EXPECT_NE(std::string(e.what()).find("does not exist"), std::string::npos);
+  }
+  // A PNG cut in the middle of its image data.
+  const std::string bytes = readTextFile(dir / "ok.png");
+  writeFileAtomic(dir / "truncated.png", bytes.substr(0, bytes.size() / 2));
+  try {
+    readImage(dir / "truncated.png");
+    FAIL() << "truncated PNG decoded";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, (dir / "truncated.png").string());
+    EXPECT_NE(std::string(e.what()).find("not a readable image"), std::string::npos) << e.what();
+  }
+  writeFileAtomic(dir / "text.png", "hello");
+  EXPECT_THROW(readImage(dir / "text.png"), Error);
+  EXPECT_THROW(writeImageAtomic(dir / "noext", img), Error);
+}
+
+TEST(Io, ExrRoundTripKeepsFloatsChannelOrderAndAttributes) {
+  const fs::path dir = tmpDir("exr");
+  ExrImage exr;
+  exr.image.create(17, 23, CV_32FC3);
+  cv::randn(exr.image, 0, 1000);
+  exr.image.at<cv::Vec3f>(3, 4) = cv::Vec3f(std::numeric_limits<float>::infinity(), -0.0f, 1e-40f);
+  exr.channels = {"Z", "A", "id"};  // not alphabetical: the order must survive
+  exr.attributes = {{"previz:pixel_origin", "pixel (0,0) is the centre of the top-left pixel"},
+                    {"previz:note", "any text"}};
+  writeExr(dir / "a.exr", exr);
+  const ExrImage back = readExr(dir / "a.exr");
+  EXPECT_EQ(back.channels, exr.channels);
+  EXPECT_EQ(back.attributes, exr.attributes);
+  ASSERT_EQ(back.image.type(), CV_32FC3);
+  EXPECT_EQ(std::memcmp(back.image.data, exr.image.data, exr.image.total() * exr.image.elemSize()), 0);
+
+  // One channel, from a non-continuous ROI.
+  cv::Mat big(40, 40, CV_32FC1);
+  cv::randu(big, -5, 5);
+  ExrImage roi{big(cv::Rect(3, 5, 20, 10)), {"Y"}, {}};
+  writeExr(dir / "roi.exr", roi);
+  const ExrImage back2 = readExr(dir / "roi.exr");
+  EXPECT_EQ(cv::norm(back2.image, roi.image, cv::NORM_INF), 0.0);
+  EXPECT_EQ(folderEntries(dir), (std::vector<std::string>{"a.exr", "roi.exr"}));
+}
+
+TEST(Io, ExrErrorsNameTheFile) {
+  const fs::path dir = tmpDir("exr_errors");
+  EXPECT_THROW(readExr(dir / "none.exr"), Error);
+  writeFileAtomic(dir / "bad.exr", "not an exr");
+  try {
+    readExr(dir / "bad.exr");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, (dir / "bad.exr").string());
+  }
+  ExrImage wrong{cv::Mat(4, 4, CV_8UC1, cv::Scalar(0)), {"Y"}, {}};
+  EXPECT_THROW(writeExr(dir / "w.exr", wrong), Error);
+  ExrImage names{cv::Mat(4, 4, CV_32FC2, cv::Scalar(0)), {"R"}, {}};
+  EXPECT_THROW(writeExr(dir / "n.exr", names), Error);
+}
+
+TEST(Io, DepthExrUsesChannelZAndKeepsInfinity) {
+  const fs::path dir = tmpDir("depth");
+  cv::Mat depth(12, 16, CV_32FC1, cv::Scalar(std::numeric_limits<float>::infinity()));
+  for (int y = 3; y < 9; ++y)
+    for (int x = 4; x < 12; ++x) depth.at<float>(y, x) = 1.5f + 0.01f * x + 0.001f * y;
+  writeDepthExr(dir / "d.exr", depth, {{"previz:camera", "main"}});
+  const ExrImage raw = readExr(dir / "d.exr");
+  EXPECT_EQ(raw.channels, std::vector<std::string>{"Z"});
+  EXPECT_EQ(raw.attributes.at("previz:camera"), "main");
+  EXPECT_TRUE(raw.attributes.count("previz:depth"));
+  const cv::Mat back = readDepthExr(dir / "d.exr");
+  int inf = 0;
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const float a = depth.at<float>(y, x), b = back.at<float>(y, x);
+      if (std::isinf(a)) {
+        EXPECT_TRUE(std::isinf(b) && b > 0);
+        ++inf;
+      } else {
+        EXPECT_EQ(a, b);
+      }
+    }
+  EXPECT_EQ(inf, 12 * 16 - 6 * 8);
+  ExrImage no_z{cv::Mat(2, 2, CV_32FC1, cv::Scalar(1)), {"Y"}, {}};
+  writeExr(dir / "noz.exr", no_z);
+  EXPECT_THROW(readDepthExr(dir / "noz.exr"), Error);
+}
+
+}  // namespace
+}  // namespace previz

@@ -13,5 +13,6 @@ using Runner = std::function<int()>;
 Runner addSynthCommand(CLI::App& app);
 Runner addDemoCommand(CLI::App& app);
 Runner addCameraCommand(CLI::App& app);
+Runner addCalibCommand(CLI::App& app);
 
 }  // namespace previz::app

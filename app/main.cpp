@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   };
   add("synth", previz::app::addSynthCommand);
   add("camera", previz::app::addCameraCommand);
+  add("calib", previz::app::addCalibCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");
 

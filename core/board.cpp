@@ -14,7 +14,8 @@ namespace {
 
 // Marker grid size (bits, without the black border) and code count of the dictionaries a
 // board may name. Kept here rather than asked of OpenCV so that core validates boards without
-// the aruco module; the values are OpenCV's predefined dictionaries (aruco/dictionary.hpp).
+// the aruco module; the values are OpenCV's predefined dictionaries (aruco/dictionary.hpp),
+// listed in the order of OpenCV's PREDEFINED_DICTIONARY_NAME enum (index = OpenCV's id).
 struct DictionaryInfo {
   const char* name;
   int marker_bits;
@@ -40,6 +41,20 @@ const DictionaryInfo* findDictionary(const std::string& name) {
     if (name == d.name) return &d;
   return nullptr;
 }
+
+}  // namespace
+
+int openCvDictionaryId(const std::string& name) {
+  const DictionaryInfo* d = findDictionary(name);
+  if (!d) {
+    ErrorContext context;
+    context.field = "dictionary";
+    throw Error("board: dictionary '" + name + "' is not an OpenCV predefined dictionary", context);
+  }
+  return static_cast<int>(d - kDictionaries);
+}
+
+namespace {
 
 std::string num(double v) {
   std::ostringstream s;

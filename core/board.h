@@ -44,6 +44,10 @@ struct BoardPoint {
 };
 std::vector<BoardPoint> boardPoints(const BoardSpec& spec);
 
+// OpenCV's PREDEFINED_DICTIONARY_NAME value for a dictionary name ("DICT_5X5_1000", ...), for
+// cv::aruco::getPredefinedDictionary. Throws Error naming the field 'dictionary' when unknown.
+int openCvDictionaryId(const std::string& name);
+
 nlohmann::json boardToJson(const BoardSpec& spec);
 BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file = {});
 BoardSpec readBoard(const std::filesystem::path& path);

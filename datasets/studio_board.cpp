@@ -14,28 +14,6 @@ namespace previz::synth {
 
 namespace {
 
-cv::aruco::PREDEFINED_DICTIONARY_NAME dictionaryId(const std::string& name) {
-  using namespace cv::aruco;
-  static const std::pair<const char*, PREDEFINED_DICTIONARY_NAME> kIds[] = {
-      {"DICT_4X4_50", DICT_4X4_50},          {"DICT_4X4_100", DICT_4X4_100},
-      {"DICT_4X4_250", DICT_4X4_250},        {"DICT_4X4_1000", DICT_4X4_1000},
-      {"DICT_5X5_50", DICT_5X5_50},          {"DICT_5X5_100", DICT_5X5_100},
-      {"DICT_5X5_250", DICT_5X5_250},        {"DICT_5X5_1000", DICT_5X5_1000},
-      {"DICT_6X6_50", DICT_6X6_50},          {"DICT_6X6_100", DICT_6X6_100},
-      {"DICT_6X6_250", DICT_6X6_250},        {"DICT_6X6_1000", DICT_6X6_1000},
-      {"DICT_7X7_50", DICT_7X7_50},          {"DICT_7X7_100", DICT_7X7_100},
-      {"DICT_7X7_250", DICT_7X7_250},        {"DICT_7X7_1000", DICT_7X7_1000},
-      {"DICT_ARUCO_ORIGINAL", DICT_ARUCO_ORIGINAL}, {"DICT_APRILTAG_16h5", DICT_APRILTAG_16h5},
-      {"DICT_APRILTAG_25h9", DICT_APRILTAG_25h9},   {"DICT_APRILTAG_36h10", DICT_APRILTAG_36h10},
-      {"DICT_APRILTAG_36h11", DICT_APRILTAG_36h11},
-  };
-  for (const auto& [n, id] : kIds)
-    if (name == n) return id;
-  ErrorContext context;
-  context.field = "dictionary";
-  throw Error("board: dictionary '" + name + "' is not an OpenCV predefined dictionary", context);
-}
-
 class BoardPrimitive final : public Primitive {
  public:
   BoardPrimitive(const BoardSpec& spec, const Pose& T_world_board)
@@ -139,7 +117,7 @@ class BoardPrimitive final : public Primitive {
 
  private:
   void buildCharuco() {
-    const auto dictionary = cv::aruco::getPredefinedDictionary(dictionaryId(spec_.dictionary));
+    const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(spec_.dictionary));
     marker_cells_ = dictionary->markerSize + 2;  // one-cell black border, as OpenCV draws
     // OpenCV >= 4.6 layout: the top-left square is black, markers fill the white squares in
     // row-major order. The legacy (< 4.6) layout differs only for an even number of rows,

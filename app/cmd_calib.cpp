@@ -1,0 +1,304 @@
+// previz calib: calibrate a camera's intrinsics from images (or a video) of a board, and print
+// boards. Thin: read inputs, call calib/ (detect, focus, selection, intrinsics, frontal,
+// validation, report), write the camera and the report.
+#include <algorithm>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "app/commands.h"
+#include "app/progress.h"
+#include "calib/board_print.h"
+#include "calib/detect.h"
+#include "calib/focus.h"
+#include "calib/frontal.h"
+#include "calib/intrinsics.h"
+#include "calib/report.h"
+#include "calib/selection.h"
+#include "calib/validation.h"
+#include "core/camera_io.h"
+#include "core/error.h"
+#include "core/io.h"
+#include "core/rig.h"
+
+namespace previz::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CalibArgs {
+  // intrinsics
+  std::string images, board, out, report, lock, loss = "huber", select_method = "uncertainty";
+  std::string camera_name;
+  int select = 0;
+  int refine = 0;
+  double loss_scale_px = 1.0;
+  bool keep_soft = false;
+  bool no_cross_validate = false;
+  bool json = false;
+  bool quiet = false;
+  // board
+  double dpi = 300;
+  std::string board_out;
+};
+
+bool isImageFile(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" ||
+         ext == ".bmp" || ext == ".pgm" || ext == ".ppm";
+}
+
+// Where the images come from: a folder of image files (sorted by name) or one video file. Frames
+// are read on demand so that long sequences never sit in memory.
+class ImageSource {
+ public:
+  explicit ImageSource(const std::string& path) : path_(path) {
+    ErrorContext context;
+    context.file = path;
+    if (fs::is_directory(path_)) {
+      for (const auto& entry : fs::directory_iterator(path_)) {
+        if (entry.is_regular_file() && isImageFile(entry.path())) files_.push_back(entry.path());
+      }
+      std::sort(files_.begin(), files_.end());
+      if (files_.empty()) throw Error("calib: no image files (png, jpg, tif, bmp) in the folder", context);
+      count_ = static_cast<int>(files_.size());
+    } else if (fs::is_regular_file(path_)) {
+      openVideo();
+      count_ = static_cast<int>(video_->get(cv::CAP_PROP_FRAME_COUNT));
+      if (count_ <= 0) throw Error("calib: the video has no frames", context);
+    } else {
+      throw Error("calib: no such folder or video", context);
+    }
+  }
+  int size() const { return count_; }
+  std::string name(int i) const {
+    return files_.empty() ? "frame " + std::to_string(i) : files_[i].filename().string();
+  }
+  // Throws Error naming the file when it cannot be read.
+  cv::Mat read(int i) {
+    if (!files_.empty()) return readImage(files_[i], cv::IMREAD_COLOR);
+    if (i < next_frame_) openVideo();
+    cv::Mat frame;
+    while (next_frame_ <= i) {
+      if (!video_->read(frame)) {
+        ErrorContext context;
+        context.file = path_.string();
+        context.frame = next_frame_;
+        throw Error("calib: could not read the video frame", context);
+      }
+      ++next_frame_;
+    }
+    return frame;
+  }
+
+ private:
+  void openVideo() {
+    video_ = std::make_unique<cv::VideoCapture>(path_.string());
+    next_frame_ = 0;
+    if (!video_->isOpened()) {
+      ErrorContext context;
+      context.file = path_.string();
+      throw Error("calib: not a folder of images and not a video OpenCV can open", context);
+    }
+  }
+  fs::path path_;
+  std::vector<fs::path> files_;
+  std::unique_ptr<cv::VideoCapture> video_;
+  int next_frame_ = 0;
+  int count_ = 0;
+};
+
+int runIntrinsics(const CalibArgs& a) {
+  const BoardSpec board = readBoard(a.board);
+  calib::IntrinsicsOptions solve;
+  solve.locks = calib::IntrinsicLocks::parse(a.lock);
+  solve.loss = calib::robustLossFromString(a.loss);
+  solve.loss_scale_px = a.loss_scale_px;
+  solve.camera_name = a.camera_name.empty() ? fs::path(a.out).stem().string() : a.camera_name;
+  solve.validate();
+  calib::SelectionOptions selection;
+  selection.method = calib::selectionMethodFromString(a.select_method);
+  selection.views = std::max(1, a.select);
+  selection.locks = solve.locks;
+  selection.validate();
+  if (a.refine < 0) {
+    ErrorContext context;
+    context.field = "--refine";
+    throw Error("calib: --refine must be >= 0", context);
+  }
+
+  // 1. Detect the board in every image.
+  ImageSource source(a.images);
+  std::vector<calib::ViewObservations> views(source.size());
+  ProgressLine progress("calib detect", source.size(), a.quiet);
+  for (int i = 0; i < source.size(); ++i) {
+    const cv::Mat image = source.read(i);
+    views[i] = calib::detectBoard(image, board, {}, source.name(i));
+    views[i].image_size = image.size();
+    progress.update(i + 1);
+  }
+  int found = 0;
+  for (const auto& v : views) found += v.found();
+  if (found == 0) {
+    ErrorContext context;
+    context.file = a.images;
+    throw Error("calib: the board " + a.board + " describes (" + toString(board.type) + ", " +
+                    std::to_string(board.rows) + " x " + std::to_string(board.cols) +
+                    ") was found in none of the " + std::to_string(views.size()) + " images",
+                context);
+  }
+  const int soft = a.keep_soft ? 0 : calib::rejectSoftViews(views);
+  for (const auto& v : views) {
+    if (!v.found()) std::cerr << "calib: no board in " << v.source << ": " << v.failure << "\n";
+    else if (v.rejected) std::cerr << "calib: not using " << v.source << ": " << v.rejected_reason << "\n";
+  }
+  std::cerr << "calib: board found in " << found << " of " << views.size() << " images" << (soft ? ", " + std::to_string(soft) + " too soft" : "") << "\n";
+
+  // 2. Choose views (streaming selector; linearised at a quick calibration of a spread of them).
+  calib::CalibReport report;
+  report.board = board;
+  std::vector<calib::ViewObservations> solve_views;
+  std::vector<int> solve_index;
+  int usable = 0;
+  for (const auto& v : views) usable += v.found() && !v.rejected;
+  if (a.select > 0 && usable > a.select) {
+    std::vector<calib::ViewObservations> spread;
+    for (int k = 0, taken = 0; k < static_cast<int>(views.size()); ++k) {
+      if (!views[k].found() || views[k].rejected) continue;
+      if ((taken++ * 20) % usable < 20) spread.push_back(views[k]);
+    }
+    try {
+      calib::IntrinsicsOptions quick = solve;
+      quick.compute_covariance = false;
+      selection.guess = calib::calibrateIntrinsics(spread, board, quick).camera;
+    } catch (const Error&) {
+      // the selector's nominal guess will do
+    }
+    calib::ViewSelector selector(board, views.front().image_size, selection);
+    for (const auto& v : views) selector.add(v);
+    solve_index = selector.selectedIndices();
+    report.selection_summary = selector.summary();
+    std::cerr << report.selection_summary << "\n";
+  } else {
+    for (int i = 0; i < static_cast<int>(views.size()); ++i) solve_index.push_back(i);
+  }
+  for (int i : solve_index) solve_views.push_back(views[i]);
+  if (a.select > 0) report.selected = solve_index;
+
+  // 3. Solve, 4. refine frontally, 5. say how sure we are.
+  report.result = calibrateIntrinsics(solve_views, board, solve);
+  if (a.refine > 0) {
+    calib::FrontalOptions frontal;
+    frontal.max_iterations = a.refine;
+    frontal.solve = solve;
+    const calib::FrontalResult refined = calib::refineFrontal(
+        [&](size_t k) { return source.read(solve_index[k]); }, solve_views, board, report.result, frontal);
+    std::cerr << refined.report();
+    report.frontal = refined.iterations;
+    report.result = refined.result;
+    solve_views = refined.views;
+  }
+  calib::UncertaintyOptions uncertainty;
+  uncertainty.mode = report.result.joint_covariance.size() > 0 ? calib::UncertaintyMode::kMeanFrames
+                                                               : calib::UncertaintyMode::kIntrinsicsOnly;
+  if (report.result.covariance_ok) report.uncertainty = calib::projectionUncertainty(report.result, uncertainty);
+  if (!a.no_cross_validate) {
+    calib::CrossValidationOptions cross;
+    cross.solve = solve;
+    try {
+      report.cross_validation = calib::crossValidate(solve_views, board, cross);
+      std::cerr << report.cross_validation->report();
+    } catch (const Error& e) {
+      std::cerr << "calib: no cross-validation: " << e.what() << "\n";
+    }
+  }
+  report.views = views;
+
+  // 6. Write the camera (previz JSON + OpenCV YAML beside it) and the report.
+  const fs::path out(a.out);
+  writeJsonAtomic(out, cameraToJson(report.result.camera));
+  fs::path yaml = out;
+  yaml.replace_extension(".yaml");
+  writeOpenCvCamera(report.result.camera, yaml);
+  fs::path stem = a.report.empty() ? fs::path(out).replace_extension("") : fs::path(a.report);
+  const calib::ReportFiles files = calib::writeCalibReport(report, stem);
+  std::cerr << report.result.fullReport();
+  std::cerr << "calib: wrote " << out.string() << ", " << yaml.string() << ", " << files.json.string()
+            << " and pictures beside it\n";
+  if (a.json) {
+    nlohmann::json j = calib::reportToJson(report);
+    j["command"] = "calib intrinsics";
+    j["out"] = out.string();
+    j["opencv_yaml"] = yaml.string();
+    j["report"] = files.json.string();
+    std::cout << j.dump() << "\n";
+  }
+  return 0;
+}
+
+int runBoard(const CalibArgs& a) {
+  const BoardSpec board = readBoard(a.board);
+  const calib::PrintedBoard printed = calib::printBoard(board, a.dpi, a.board_out);
+  std::cerr << "calib board: " << printed.png.string() << " (" << printed.png_size.width << " x "
+            << printed.png_size.height << " px at " << a.dpi << " dpi, " << printed.width_mm
+            << " x " << printed.height_mm << " mm), " << printed.svg.string() << ", "
+            << printed.json.string() << "; print at 100 %\n";
+  if (a.json) {
+    std::cout << nlohmann::json{{"command", "calib board"}, {"png", printed.png.string()},
+                                {"svg", printed.svg.string()}, {"json", printed.json.string()},
+                                {"width_mm", printed.width_mm}, {"height_mm", printed.height_mm}}
+                     .dump()
+              << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+Runner addCalibCommand(CLI::App& app) {
+  auto a = std::make_shared<CalibArgs>();
+  CLI::App* cmd = app.add_subcommand("calib", "Calibrate camera intrinsics from board images; print boards");
+  cmd->require_subcommand(1);
+
+  CLI::App* in = cmd->add_subcommand(
+      "intrinsics", "Calibrate one camera from a folder of images or a video of a board");
+  in->add_option("--images", a->images, "Folder of images (png, jpg, tif, bmp) or a video file")->required();
+  in->add_option("--board", a->board, "Board description (board JSON, docs/formats.md)")->required();
+  in->add_option("--out", a->out, "Camera JSON to write (OpenCV YAML and the report go beside it)")->required();
+  in->add_option("--report", a->report, "Report file stem (default: --out without extension)");
+  in->add_option("--name", a->camera_name, "Camera name (default: --out's stem)");
+  in->add_option("--select", a->select, "Calibrate from the N most useful views (0 = all)")->capture_default_str();
+  in->add_option("--select-method", a->select_method,
+                 "uncertainty | information | plane-angles | random | sequential")
+      ->capture_default_str();
+  in->add_option("--refine", a->refine, "Rounds of frontal refinement (Datta et al. 2009; 0 = none)")
+      ->capture_default_str();
+  in->add_option("--lock", a->lock,
+                 "Held parameters, comma-separated: fix_focal, fix_aspect, fix_principal_point, "
+                 "fix_k1, fix_k2, fix_k3, fix_tangential, fix_radial, fix_distortion, free_skew");
+  in->add_option("--loss", a->loss, "Robust loss: huber | cauchy | none")->capture_default_str();
+  in->add_option("--loss-scale", a->loss_scale_px, "Robust loss scale, px")->capture_default_str();
+  in->add_flag("--keep-soft", a->keep_soft, "Keep views the focus measure calls soft");
+  in->add_flag("--no-cross-validate", a->no_cross_validate, "Skip the two-halves cross-validation");
+  in->add_flag("--json", a->json, "Print the report JSON on stdout");
+  in->add_flag("--quiet", a->quiet, "No progress line");
+
+  CLI::App* bd = cmd->add_subcommand("board", "Write a printable board: PNG at a DPI, SVG in mm, board JSON");
+  bd->add_option("--board", a->board, "Board description (board JSON)")->required();
+  bd->add_option("--dpi", a->dpi, "Print resolution, dots per inch")->capture_default_str();
+  bd->add_option("--out", a->board_out, "Output stem: <stem>.png, <stem>.svg, <stem>.json")->required();
+  bd->add_flag("--json", a->json, "Print a JSON summary on stdout");
+
+  return [a, in, bd]() {
+    if (in->parsed()) return runIntrinsics(*a);
+    if (bd->parsed()) return runBoard(*a);
+    return 2;
+  };
+}
+
+}  // namespace previz::app

@@ -1,0 +1,104 @@
+#pragma once
+// Internals shared by the per-board detectors (calib/detect_*.cpp). Not a public header.
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "calib/detect.h"
+
+namespace previz::calib::detail {
+
+// The image in the forms the detectors need, built once per call.
+class DetectInput {
+ public:
+  DetectInput(const cv::Mat& image, const DetectOptions& options, const std::string& source);
+  const cv::Mat& grey() const { return grey_; }  // CV_8UC1
+  // linearImage() blurred by a Gaussian of sigma_px (0: linearImage()); each sigma asked for
+  // is kept.
+  const cv::Mat& prefilteredImage(double sigma_px) const;
+  // Linear light without the pre-filter (circle edges need the unfiltered profile).
+  const cv::Mat& linearImage() const;
+  cv::Size size() const { return grey_.size(); }
+  const DetectOptions& options() const { return options_; }
+
+ private:
+  cv::Mat grey_;
+  mutable cv::Mat linear_;
+  mutable std::map<double, cv::Mat> prefiltered_;
+  DetectOptions options_;
+};
+
+// sRGB code value (0..255) -> linear light in [0, 1].
+const float* srgbToLinearTable();
+
+// True when the pixel lies closer than margin to the image border (pixel-centre convention:
+// the image spans [-0.5, size - 0.5]).
+bool nearBorder(const Eigen::Vector2d& px, cv::Size size, double margin);
+
+// The cornerSubPix half window of a point whose nearest edge NOT passing through it lies
+// free_px away (measured in the worst direction, see the callers):
+// min(subpixel_window_px, floor(free_px - 0.5)): half a pixel is left for the anti-aliasing of
+// that edge (cornerSubPix weights the window's rim by exp(-1) and its corners by exp(-2)); on the
+// studio's ChArUco and AprilGrid views a full pixel of clearance lost 3 % of the points and
+// gained no accuracy. half = 0 when below 2 (too small: the point is dropped).
+struct RefineWindow {
+  int half = 0;
+  double free_px = 0;  // distance to the nearest foreign edge (inf: none)
+};
+RefineWindow refineWindow(double free_px, const DetectOptions& options);
+
+// Edge blur (sigma, px) of the image over the points' convex hull, from the focus measure
+// (focus.h: sharpness ~ 0.8 / sigma); 0 when there are no edges to judge by.
+double imageEdgeSigma(const DetectInput& input, const std::vector<cv::Point2f>& points);
+
+// cornerSubPix with a half window per point. The image is the linear one pre-filtered towards
+// options.prefilter_sigma_px: in full where the foreign edge lies at least twice the total edge
+// sigma outside the window (chessboards, large tags: the filter averages noise and aliasing
+// away), else only by what the image's own blur lacks of the target. Blur on blur next to a
+// foreign edge made tight windows unstable: on AprilGrid views with 1 px defocus and noise 2, a
+// full pre-filter turned 0.3 px tag corners into 1-1.7 px ones; while on chessboards in the
+// same conditions the full filter gave 0.062 px median corners against 0.071 px without. A
+// point whose
+// refinement moved it by more than its half window (it wandered onto another feature) is
+// marked false. Points with half 0 are left as they are and marked false.
+std::vector<bool> refineCorners(const DetectInput& input, std::vector<cv::Point2f>& points,
+                                const std::vector<RefineWindow>& windows);
+
+// --- Grid orientation ------------------------------------------------------------------------
+// A lattice of ni x nj nodes (i along the first axis) found in the image, some nodes possibly
+// missing, has to be mapped onto the board's nc x nr grid (c along board x, r along board y).
+// The 8 symmetries of the rectangle that fit the sizes are candidates; a board seen from its
+// printed side keeps its handedness, which leaves rotations only; 'score' (lower is better,
+// e.g. the mean grey of the squares that should be black) then picks among them, and the
+// rotation whose board +x points most to the right in the image breaks remaining ties.
+struct LatticeNode {
+  int i = 0, j = 0;
+  Eigen::Vector2d px;
+};
+struct GridMapping {
+  int transform = -1;  // dihedral index, -1 = no consistent mapping
+  // lattice (i, j) -> board grid (c, r)
+  Eigen::Vector2i map(int i, int j) const;
+  int ni = 0, nj = 0;
+};
+// score(mapping) may be empty (no colour cue). tie_fraction: scores within this fraction of
+// the spread between the best and the worst candidate count as ties.
+GridMapping chooseGridMapping(const std::vector<LatticeNode>& nodes, int ni, int nj, int nc, int nr,
+                              const std::function<double(const GridMapping&)>& score = {});
+
+// Least-squares homography from board-grid coordinates (c, r) to pixels; false if degenerate.
+bool fitGridHomography(const std::vector<Eigen::Vector2d>& grid,
+                       const std::vector<Eigen::Vector2d>& px, Eigen::Matrix3d& H);
+Eigen::Vector2d applyHomography(const Eigen::Matrix3d& H, const Eigen::Vector2d& x);
+
+// --- Per board type (detect_<type>.cpp). They fill out.points (unsorted ok) or out.failure.
+void detectChessboard(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
+void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
+void detectAprilGrid(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
+void detectCircles(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
+
+}  // namespace previz::calib::detail

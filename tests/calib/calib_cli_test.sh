@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# `previz calib` as a user meets it: help, errors that name the culprit (unreadable image, no
+# board anywhere, bad board JSON, missing folder), images without a board listed but not fatal,
+# the camera + OpenCV YAML + report written, a printable board, and a synthetic end-to-end run.
+#   calib_cli_test.sh PREVIZ_BIN SHARED_DATA TMPDIR
+set -uo pipefail
+bin="$1"; data="$2"; tmp="$3"
+rm -rf "$tmp"; mkdir -p "$tmp"
+passed=0; failed=0
+ok()   { passed=$((passed + 1)); echo "ok: $1"; }
+fail() { failed=$((failed + 1)); echo "FAIL: $1"; }
+expect_fail() {
+  local name="$1" re="$2"; shift 2
+  local err; err=$("$@" 2>&1 >/dev/null); local rc=$?
+  if [ $rc -ne 0 ] && grep -Eq -- "$re" <<<"$err"; then ok "$name"; else fail "$name (rc=$rc, stderr: $err)"; fi
+}
+# A flat grey 64 x 48 PGM: a readable image with no board in it.
+blank() { { printf 'P5\n64 48\n255\n'; head -c 3072 /dev/zero | tr '\0' '\200'; } > "$1"; }
+
+for sub in "calib" "calib intrinsics" "calib board"; do
+  if $bin $sub --help 2>&1 | grep -q "Usage"; then ok "$sub --help"; else fail "$sub --help"; fi
+done
+
+printf '{"type": "chessboard", "rows": 7, "cols": 10, "square_m": 1.0, "margin_m": 0.5}\n' > "$tmp/board.json"
+printf '{"type": "chessboard", "rows": 7, "cols": ' > "$tmp/broken_board.json"
+printf '{"type": "chessboard", "rows": -7, "cols": 10, "square_m": 1.0}\n' > "$tmp/negative_board.json"
+
+mkdir -p "$tmp/blank"; blank "$tmp/blank/a.pgm"; blank "$tmp/blank/b.pgm"
+expect_fail "no board in any image names the folder and the board" "blank.*board.json.*found in none of the 2 images" \
+  "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/board.json" --out "$tmp/x.json" --quiet
+expect_fail "malformed board JSON names the file" "broken_board.json" \
+  "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/broken_board.json" --out "$tmp/x.json" --quiet
+expect_fail "invalid board JSON names the file and field" "negative_board.json.*rows|rows.*negative_board.json" \
+  "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/negative_board.json" --out "$tmp/x.json" --quiet
+expect_fail "missing folder names it" "nosuchdir" \
+  "$bin" calib intrinsics --images "$tmp/nosuchdir" --board "$tmp/board.json" --out "$tmp/x.json" --quiet
+expect_fail "unknown lock names it" "fix_k9" \
+  "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/board.json" --out "$tmp/x.json" --lock fix_k9 --quiet
+
+real="$data/opencv-chessboard"
+if ls "$real"/left*.jpg >/dev/null 2>&1; then
+  mkdir -p "$tmp/left"; cp "$real"/left*.jpg "$tmp/left/"
+  printf 'this is not a jpeg' > "$tmp/left/left99.jpg"
+  expect_fail "unreadable image names the file" "left99.jpg" \
+    "$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/x.json" --quiet
+  rm "$tmp/left/left99.jpg"; blank "$tmp/left/zz_blank.pgm"
+  if out=$("$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/cam/left.json" \
+           --lock fix_k3 --json --quiet 2>"$tmp/stderr.txt"); then
+    ok "calibrate OpenCV's left images"
+    grep -q "no board in zz_blank.pgm" "$tmp/stderr.txt" && ok "image without a board is listed" \
+      || fail "image without a board not listed: $(cat "$tmp/stderr.txt")"
+    for f in left.json left.yaml left.report.json left.residuals.png left.coverage.png left.views.png left.uncertainty.png; do
+      [ -s "$tmp/cam/$f" ] && ok "wrote $f" || fail "did not write $f"
+    done
+    grep -q '"rms_px"' <<<"$out" && ok "--json report on stdout" || fail "--json report: $out"
+    grep -q '"zz_blank.pgm"' "$tmp/cam/left.report.json" && ok "report lists the blank image" || fail "report lacks the blank image"
+    "$bin" camera import --opencv "$tmp/cam/left.yaml" --out "$tmp/cam/rig.json" >/dev/null 2>&1 \
+      && ok "OpenCV YAML reads back" || fail "OpenCV YAML does not read back"
+    leftovers=$(find "$tmp/cam" -name '*.tmp*' | head -n 3)
+    [ -z "$leftovers" ] && ok "no temporary files left" || fail "temporary files left: $leftovers"
+  else
+    fail "calibrate OpenCV's left images: $(cat "$tmp/stderr.txt")"
+  fi
+  if "$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/sel/left.json" \
+       --select 6 --refine 1 --quiet 2>"$tmp/stderr_sel.txt" && grep -q "select (uncertainty): 6 of" "$tmp/stderr_sel.txt"; then
+    ok "--select 6 --refine 1"
+  else fail "--select 6 --refine 1: $(cat "$tmp/stderr_sel.txt")"; fi
+else
+  fail "real data missing: $real/left*.jpg"
+fi
+
+if "$bin" calib board --board "$tmp/board.json" --dpi 30 --out "$tmp/print/board" >/dev/null 2>&1 \
+   && [ -s "$tmp/print/board.png" ] && [ -s "$tmp/print/board.svg" ] && [ -s "$tmp/print/board.json" ]; then
+  ok "calib board writes PNG, SVG, JSON"
+else fail "calib board"; fi
+expect_fail "calib board with a bad DPI names it" "dpi" "$bin" calib board --board "$tmp/board.json" --dpi 1 --out "$tmp/print/x"
+
+# End to end on the synthetic studio: an intrinsics take, calibrated, against its truth.
+if "$bin" synth --preset intrinsics --board chessboard --frames 10 --size 640x360 --camera witness \
+     --noise 1 --out "$tmp/take" --quiet >/dev/null 2>&1; then
+  cam_dir=$(ls -d "$tmp"/take/cams/*/ | head -n 1)
+  if "$bin" calib intrinsics --images "$cam_dir" --board "$tmp/take/board.json" --out "$tmp/take_cam.json" \
+       --lock fix_k3 --no-cross-validate --quiet 2>"$tmp/stderr_take.txt"; then
+    if python3 - "$tmp/take_cam.json" "$tmp/take/truth/rig.json" <<'PY'
+import json, sys
+est = json.load(open(sys.argv[1]))
+truth = json.load(open(sys.argv[2]))["cameras"][0]
+err = abs(est["fx"] - truth["fx"]) / truth["fx"]
+print("fx", est["fx"], "truth", truth["fx"], "relative error", err)
+sys.exit(0 if err < 0.01 else 1)
+PY
+    then ok "synthetic take: fx within 1 % of the truth"; else fail "synthetic take: fx off"; fi
+  else fail "calibrate the synthetic take: $(tail -n 3 "$tmp/stderr_take.txt")"; fi
+else
+  fail "synth intrinsics take"
+fi
+
+echo "calib cli: $passed passed, $failed failed"
+[ "$failed" -eq 0 ]

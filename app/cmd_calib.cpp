@@ -38,6 +38,7 @@ struct CalibArgs {
   int refine = 0;
   double loss_scale_px = 1.0;
   bool keep_soft = false;
+  bool not_srgb = false;
   bool no_cross_validate = false;
   bool json = false;
   bool quiet = false;
@@ -134,11 +135,13 @@ int runIntrinsics(const CalibArgs& a) {
 
   // 1. Detect the board in every image.
   ImageSource source(a.images);
+  calib::DetectOptions detect;
+  detect.linear_light = !a.not_srgb;
   std::vector<calib::ViewObservations> views(source.size());
   ProgressLine progress("calib detect", source.size(), a.quiet);
   for (int i = 0; i < source.size(); ++i) {
     const cv::Mat image = source.read(i);
-    views[i] = calib::detectBoard(image, board, {}, source.name(i));
+    views[i] = calib::detectBoard(image, board, detect, source.name(i));
     views[i].image_size = image.size();
     progress.update(i + 1);
   }
@@ -196,6 +199,7 @@ int runIntrinsics(const CalibArgs& a) {
     calib::FrontalOptions frontal;
     frontal.max_iterations = a.refine;
     frontal.solve = solve;
+    frontal.detect.linear_light = detect.linear_light;
     const calib::FrontalResult refined = calib::refineFrontal(
         [&](size_t k) { return source.read(solve_index[k]); }, solve_views, board, report.result, frontal);
     std::cerr << refined.report();
@@ -284,6 +288,8 @@ Runner addCalibCommand(CLI::App& app) {
   in->add_option("--loss", a->loss, "Robust loss: huber | cauchy | none")->capture_default_str();
   in->add_option("--loss-scale", a->loss_scale_px, "Robust loss scale, px")->capture_default_str();
   in->add_flag("--keep-soft", a->keep_soft, "Keep views the focus measure calls soft");
+  in->add_flag("--not-srgb", a->not_srgb,
+               "Images are not sRGB-encoded: refine corners on the raw 8-bit values (calib/detect.h)");
   in->add_flag("--no-cross-validate", a->no_cross_validate, "Skip the two-halves cross-validation");
   in->add_flag("--json", a->json, "Print the report JSON on stdout");
   in->add_flag("--quiet", a->quiet, "No progress line");

@@ -300,9 +300,13 @@ Runner addCalibCommand(CLI::App& app) {
   bd->add_option("--out", a->board_out, "Output stem: <stem>.png, <stem>.svg, <stem>.json")->required();
   bd->add_flag("--json", a->json, "Print a JSON summary on stdout");
 
-  return [a, in, bd]() {
+  Runner lens = addLensCommand(*cmd);
+  CLI::App* ln = cmd->get_subcommand("lens");
+
+  return [a, in, bd, ln, lens]() {
     if (in->parsed()) return runIntrinsics(*a);
     if (bd->parsed()) return runBoard(*a);
+    if (ln->parsed()) return lens();
     return 2;
   };
 }

@@ -14,5 +14,7 @@ Runner addSynthCommand(CLI::App& app);
 Runner addDemoCommand(CLI::App& app);
 Runner addCameraCommand(CLI::App& app);
 Runner addCalibCommand(CLI::App& app);
+// `previz calib lens`, registered under the calib command.
+Runner addLensCommand(CLI::App& calib);
 
 }  // namespace previz::app

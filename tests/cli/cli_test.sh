@@ -39,6 +39,16 @@ if out=$("$bin" synth --preset studio --out "$tmp/take" --frames 2 --cams 3 --si
   [ -z "$leftovers" ] && ok "no temporary files left" || fail "temporary files left: $leftovers"
   if "$bin" camera stmap --rig "$tmp/take/truth/rig.json" --camera main --overscan 0.1 --out "$tmp/st" --json >/dev/null 2>&1 \
      && [ -s "$tmp/st/main_distort.exr" ] && [ -s "$tmp/st/main_undistort.exr" ]; then ok "camera stmap"; else fail "camera stmap"; fi
+  # A lens table from two calibrations (OpenCV YAML), queried and exported.
+  if "$bin" camera export --rig "$tmp/take/truth/rig.json" --opencv-dir "$tmp/cams" >/dev/null 2>&1 \
+     && out=$("$bin" calib lens --name cine --entry "0,0,$tmp/cams/main.yaml,0.1" --entry "1,0,$tmp/cams/main.yaml,0.2" \
+              --sensor-mm 24.9,14.0 --out "$tmp/lens/cine.json" --ulens "$tmp/lens/cine.ulens" \
+              --opentrackio "$tmp/lens/cine_otio.json" --at 0.5,0 --json 2>/dev/null) \
+     && grep -q '"entrance_pupil_m":0.15' <<<"$out" && grep -q '"clamped":false' <<<"$out" \
+     && [ -s "$tmp/lens/cine.ulens" ] && [ -s "$tmp/lens/cine_otio.json" ]; then
+    ok "calib lens builds, interpolates and exports a table"
+  else fail "calib lens: $out"; fi
+  expect_fail "calib lens names a malformed entry" "--entry" "$bin" calib lens --entry 0,0 --out "$tmp/lens/x.json"
   expect_fail "stmap of an unknown camera names it" "nosuchcam" "$bin" camera stmap --rig "$tmp/take/truth/rig.json" --camera nosuchcam --out "$tmp/st2"
 else
   fail "synth studio take"

@@ -17,6 +17,7 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <Imath/half.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfStringAttribute.h>
@@ -176,7 +177,8 @@ void writeExr(const fs::path& path, const ExrImage& exr) {
   try {
     Imf::Header header(img.cols, img.rows);
     header.compression() = Imf::ZIP_COMPRESSION;
-    for (const auto& name : exr.channels) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+    const Imf::PixelType file_type = exr.half ? Imf::HALF : Imf::FLOAT;
+    for (const auto& name : exr.channels) header.channels().insert(name, Imf::Channel(file_type));
     for (const auto& [key, value] : exr.attributes) {
       if (key == kChannelOrderAttribute) continue;
       header.insert(key, Imf::StringAttribute(value));
@@ -184,10 +186,25 @@ void writeExr(const fs::path& path, const ExrImage& exr) {
     header.insert(kChannelOrderAttribute, Imf::StringAttribute(joinNames(exr.channels)));
 
     Imf::FrameBuffer fb;
-    char* base = const_cast<char*>(reinterpret_cast<const char*>(img.data));
-    for (int c = 0; c < n; ++c)
-      fb.insert(exr.channels[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float),
-                                            n * sizeof(float), img.step[0]));
+    // OpenEXR does not convert FLOAT pixels to HALF on output: convert here, row-major.
+    std::vector<Imath::half> halves;
+    if (exr.half) {
+      halves.reserve(img.total() * n);
+      for (int y = 0; y < img.rows; ++y) {
+        const float* row = img.ptr<float>(y);
+        for (int i = 0; i < img.cols * n; ++i) halves.emplace_back(row[i]);
+      }
+      char* base = reinterpret_cast<char*>(halves.data());
+      for (int c = 0; c < n; ++c)
+        fb.insert(exr.channels[c], Imf::Slice(Imf::HALF, base + c * sizeof(Imath::half),
+                                              n * sizeof(Imath::half),
+                                              img.cols * n * sizeof(Imath::half)));
+    } else {
+      char* base = const_cast<char*>(reinterpret_cast<const char*>(img.data));
+      for (int c = 0; c < n; ++c)
+        fb.insert(exr.channels[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float),
+                                              n * sizeof(float), img.step[0]));
+    }
     Imf::StdOSStream out;
     {
       Imf::OutputFile file(out, header);

@@ -29,6 +29,9 @@ struct ExrImage {
   cv::Mat image;                                   // CV_32FC(n)
   std::vector<std::string> channels;               // one name per channel
   std::map<std::string, std::string> attributes;   // string attributes in the header
+  // Store the channels as 16-bit HALF (colour, as render engines deliver it: half the size;
+  // relative precision 2^-11). Depth and ST maps stay FLOAT. Reading always gives CV_32F.
+  bool half = false;
 };
 void writeExr(const std::filesystem::path& path, const ExrImage& exr);
 ExrImage readExr(const std::filesystem::path& path);

@@ -375,6 +375,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       ExrImage color;
       color.image = cg.rgb;
       color.channels = {"R", "G", "B"};
+      color.half = true;
       color.attributes = {{"previz:color", "linear RGB (scene-referred), no gain, no encoding"},
                           {"previz:pixel_origin", "pixel (0,0) is the centre of the top-left pixel"},
                           {"previz:camera", "cg (ideal pinhole of main, see cg/camera.json)"},

@@ -113,6 +113,32 @@ TEST(Io, ExrRoundTripKeepsFloatsChannelOrderAndAttributes) {
   EXPECT_EQ(folderEntries(dir), (std::vector<std::string>{"a.exr", "roi.exr"}));
 }
 
+TEST(Io, HalfExrKeepsColourToHalfPrecisionAndReadsAsFloat) {
+  const fs::path dir = tmpDir("exr_half");
+  ExrImage exr;
+  exr.image.create(31, 29, CV_32FC3);
+  cv::randu(exr.image, 0.0, 4.0);
+  exr.channels = {"R", "G", "B"};
+  exr.half = true;
+  writeExr(dir / "c.exr", exr);
+  exr.half = false;
+  writeExr(dir / "f.exr", exr);
+  const ExrImage back = readExr(dir / "c.exr");
+  ASSERT_EQ(back.image.type(), CV_32FC3);
+  EXPECT_EQ(back.channels, exr.channels);
+  // HALF has an 11-bit significand: relative error <= 2^-11 after round to nearest.
+  double worst = 0;
+  for (int y = 0; y < exr.image.rows; ++y)
+    for (int x = 0; x < exr.image.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const float a = exr.image.at<cv::Vec3f>(y, x)[c], b = back.image.at<cv::Vec3f>(y, x)[c];
+        worst = std::max(worst, std::abs(double(a) - b) / std::max(1e-6, double(std::abs(a))));
+      }
+  EXPECT_LE(worst, std::ldexp(1.0, -11));
+  EXPECT_GT(worst, 0.0);  // it really was stored as HALF
+  EXPECT_LT(fs::file_size(dir / "c.exr"), fs::file_size(dir / "f.exr"));
+}
+
 TEST(Io, ExrErrorsNameTheFile) {
   const fs::path dir = tmpDir("exr_errors");
   EXPECT_THROW(readExr(dir / "none.exr"), Error);

@@ -116,6 +116,19 @@ bool nearBorder(const Eigen::Vector2d& px, cv::Size size, double margin) {
            px.y() >= -0.5 + margin && px.y() <= size.height - 0.5 - margin);
 }
 
+MarkerCheck checkMarker(const std::array<Eigen::Vector2d, 4>& px, cv::Size size,
+                        const DetectOptions& options, double* shortest_edge_px) {
+  double edge = std::numeric_limits<double>::infinity();
+  bool border = false;
+  for (int q = 0; q < 4; ++q) {
+    edge = std::min(edge, (px[q] - px[(q + 1) % 4]).norm());
+    border = border || nearBorder(px[q], size, options.border_margin_px);
+  }
+  if (shortest_edge_px) *shortest_edge_px = edge;
+  if (edge < options.min_marker_px) return MarkerCheck::kTooSmall;
+  return border ? MarkerCheck::kAtBorder : MarkerCheck::kOk;
+}
+
 RefineWindow refineWindow(double free_px, const DetectOptions& options) {
   RefineWindow w;
   w.half = options.subpixel_window_px;

@@ -114,19 +114,16 @@ void detectAprilGrid(const DetectInput& input, const BoardSpec& board, ViewObser
   for (apriltag_detection_t* det : mine) {
     if (seen[det->id] != 1) continue;  // the same id twice: which is the board's?
     std::array<Eigen::Vector2d, 4> px;
-    bool border = false;
-    for (int q = 0; q < 4; ++q) {
+    for (int q = 0; q < 4; ++q)
       px[q] = Eigen::Vector2d(det->p[q][0], det->p[q][1]) +
               Eigen::Vector2d::Constant(kApriltagPixelOffset);
-      border = border || nearBorder(px[q], input.size(), options.border_margin_px);
-    }
-    double edge = std::numeric_limits<double>::infinity();
-    for (int q = 0; q < 4; ++q) edge = std::min(edge, (px[q] - px[(q + 1) % 4]).norm());
-    if (edge < options.min_marker_px) {
+    double edge = 0;
+    const MarkerCheck check = checkMarker(px, input.size(), options, &edge);
+    if (check == MarkerCheck::kTooSmall) {
       ++small;
       continue;
     }
-    if (border) {
+    if (check == MarkerCheck::kAtBorder) {
       ++at_border;
       continue;
     }

@@ -219,19 +219,13 @@ void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObserva
     const double x0 = mk.square_c * s + g, y0 = mk.square_r * s + g;
     mk.board = {Eigen::Vector2d(x0, y0), Eigen::Vector2d(x0 + m, y0),
                 Eigen::Vector2d(x0 + m, y0 + m), Eigen::Vector2d(x0, y0 + m)};
-    double min_edge = std::numeric_limits<double>::infinity();
-    bool border = false;
-    for (int q = 0; q < 4; ++q) {
-      mk.px[q] = Eigen::Vector2d(corners[k][q].x, corners[k][q].y);
-      border = border || nearBorder(mk.px[q], input.size(), options.border_margin_px);
-    }
-    for (int q = 0; q < 4; ++q)
-      min_edge = std::min(min_edge, (mk.px[q] - mk.px[(q + 1) % 4]).norm());
-    if (min_edge < options.min_marker_px) {
+    for (int q = 0; q < 4; ++q) mk.px[q] = Eigen::Vector2d(corners[k][q].x, corners[k][q].y);
+    const MarkerCheck check = checkMarker(mk.px, input.size(), options);
+    if (check == MarkerCheck::kTooSmall) {
       ++small;
       continue;
     }
-    if (border) {
+    if (check == MarkerCheck::kAtBorder) {
       ++at_border;
       continue;
     }

@@ -1,4 +1,5 @@
 #pragma once
+#include <array>
 // Internals shared by the per-board detectors (calib/detect_*.cpp). Not a public header.
 #include <functional>
 #include <map>
@@ -38,6 +39,13 @@ const float* srgbToLinearTable();
 // True when the pixel lies closer than margin to the image border (pixel-centre convention:
 // the image spans [-0.5, size - 0.5]).
 bool nearBorder(const Eigen::Vector2d& px, cv::Size size, double margin);
+
+// The two reasons a detected marker or tag (its four corners) is skipped, the failure modes
+// the thesis met: too small for the refinement window (shortest edge < min_marker_px) or too
+// close to the image border (any corner within border_margin_px). Small is tested first.
+enum class MarkerCheck { kOk, kTooSmall, kAtBorder };
+MarkerCheck checkMarker(const std::array<Eigen::Vector2d, 4>& px, cv::Size size,
+                        const DetectOptions& options, double* shortest_edge_px = nullptr);
 
 // The cornerSubPix half window of a point whose nearest edge NOT passing through it lies
 // free_px away (measured in the worst direction, see the callers):

@@ -6,14 +6,7 @@
 set -uo pipefail
 bin="$1"; data="$2"; tmp="$3"
 rm -rf "$tmp"; mkdir -p "$tmp"
-passed=0; failed=0
-ok()   { passed=$((passed + 1)); echo "ok: $1"; }
-fail() { failed=$((failed + 1)); echo "FAIL: $1"; }
-expect_fail() {
-  local name="$1" re="$2"; shift 2
-  local err; err=$("$@" 2>&1 >/dev/null); local rc=$?
-  if [ $rc -ne 0 ] && grep -Eq -- "$re" <<<"$err"; then ok "$name"; else fail "$name (rc=$rc, stderr: $err)"; fi
-}
+source "$(dirname "${BASH_SOURCE[0]}")/../cli/checks.sh"
 # A flat grey 64 x 48 PGM: a readable image with no board in it.
 blank() { { printf 'P5\n64 48\n255\n'; head -c 3072 /dev/zero | tr '\0' '\200'; } > "$1"; }
 
@@ -95,5 +88,4 @@ else
   fail "synth intrinsics take"
 fi
 
-echo "calib cli: $passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

@@ -5,16 +5,7 @@
 set -uo pipefail
 bin="$1"; data="$2"; tmp="$3"
 rm -rf "$tmp"; mkdir -p "$tmp"
-passed=0; failed=0
-ok()   { passed=$((passed + 1)); echo "ok: $1"; }
-fail() { failed=$((failed + 1)); echo "FAIL: $1"; }
-
-# expect_fail NAME REGEX CMD... : exit code must be non-zero and stderr must match REGEX
-expect_fail() {
-  local name="$1" re="$2"; shift 2
-  local err; err=$("$@" 2>&1 >/dev/null); local rc=$?
-  if [ $rc -ne 0 ] && grep -Eq -- "$re" <<<"$err"; then ok "$name"; else fail "$name (rc=$rc, stderr: $err)"; fi
-}
+source "$(dirname "${BASH_SOURCE[0]}")/checks.sh"
 
 expect_fail "unknown command fails" "nosuch|not expected|Extras" "$bin" nosuch
 expect_fail "frames 0 names the field" "frames" "$bin" synth --out "$tmp/x" --frames 0 --quiet
@@ -73,5 +64,4 @@ if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev
   ok "demo writes a contact sheet"
 else fail "demo"; fi
 
-echo "$passed passed, $failed failed"
-[ "$failed" -eq 0 ]
+finish

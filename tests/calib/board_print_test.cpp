@@ -17,6 +17,7 @@
 #include "calib/detect.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace previz::calib {
 namespace {
@@ -90,8 +91,7 @@ std::vector<BoardSpec> smallBoards() {
 }
 
 TEST(BoardPrint, PngHasPhysicalSizeAndDpiAndEveryPointIsRedetected) {
-  const fs::path dir = fs::path(PREVIZ_TEST_TMP) / "board_print";
-  fs::create_directories(dir);
+  const fs::path dir = test::scratchDir("board_print", "boards");
   const double dpi = 100;
   int n = 0;
   for (const BoardSpec& spec : smallBoards()) {
@@ -172,14 +172,14 @@ TEST(BoardPrint, DrawBoardPutsPointsAtTheirPhysicalPlace) {
 TEST(BoardPrint, BadDpiAndBoardThrowNamingTheField) {
   BoardSpec spec;
   try {
-    printBoard(spec, 0, fs::path(PREVIZ_TEST_TMP) / "bad");
+    printBoard(spec, 0, test::scratchDir("board_print", "bad") / "board");
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("dpi"), std::string::npos) << e.what();
   }
   spec.rows = 1;
   try {
-    printBoard(spec, 100, fs::path(PREVIZ_TEST_TMP) / "bad");
+    printBoard(spec, 100, test::scratchDir("board_print", "bad") / "board");
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("rows"), std::string::npos) << e.what();

@@ -13,6 +13,7 @@
 #include "core/distortion_maps.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace previz::calib {
 namespace {
@@ -20,10 +21,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path tmpDir(const std::string& name) {
-  const fs::path p = fs::path(PREVIZ_TEST_TMP) / "lens_table_test" / name;
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::scratchDir("lens_table_test", name);
 }
 
 // A made-up but plausible zoom lens state: focal length grows with zoom, distortion goes

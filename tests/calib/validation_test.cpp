@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "tests/calib/solve_fixtures.h"
+#include "scratch.h"
 
 namespace previz::calib {
 namespace {
@@ -161,7 +162,7 @@ TEST(Validation, ReportWritesJsonAndPictures) {
   UncertaintyOptions uo;
   uo.mode = UncertaintyMode::kMeanFrames;
   report.uncertainty = projectionUncertainty(report.result, uo);
-  const std::filesystem::path stem = std::filesystem::path(PREVIZ_TEST_TMP) / "calib_report" / "cam";
+  const std::filesystem::path stem = test::scratchDir("calib_report", "report") / "cam";
   const ReportFiles files = writeCalibReport(report, stem);
   for (const auto& f : {files.json, files.residuals, files.coverage, files.uncertainty, files.views}) {
     ASSERT_TRUE(std::filesystem::exists(f)) << f;

@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace fs = std::filesystem;
 
@@ -20,10 +21,7 @@ namespace previz {
 namespace {
 
 fs::path tmpDir(const std::string& name) {
-  const fs::path p = fs::path(PREVIZ_TEST_TMP) / "camera_io_test" / name;
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::scratchDir("camera_io_test", name);
 }
 
 Camera sampleCamera() {

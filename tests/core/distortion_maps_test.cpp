@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace fs = std::filesystem;
 
@@ -160,8 +161,7 @@ TEST(DistortionMaps, RemappedCheckerMatchesTheAnalyticLensImage) {
 }
 
 TEST(DistortionMaps, StMapExrRoundTripIsExactToFloatAndStatesItsConvention) {
-  const fs::path dir = fs::path(PREVIZ_TEST_TMP) / "distortion_maps_test";
-  fs::remove_all(dir);
+  const fs::path dir = test::scratchDir("distortion_maps_test", "stmap");
   const Camera l = lens(kBarrel);
   const Camera p = idealPinhole(l, 0.1);
   const DistortMapResult D = makeDistortMap(l, p);

@@ -10,6 +10,7 @@
 
 #include "core/camera.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace previz {
 namespace {
@@ -255,7 +256,7 @@ MethodStats compareMethods(const Camera& cam, cv::Mat* fp_iterations_image = nul
 TEST(InverseDistortion, FixedPointStallsNearTheFoldOfAStrongBarrelLens) {
   cv::Mat iterations;
   const MethodStats s = compareMethods(lensCamera({-0.5, 0, 0, 0, 0}), &iterations);
-  const std::filesystem::path out = std::filesystem::path(PREVIZ_TEST_TMP) / "fixed_point_iterations_k1_-0.5.png";
+  const std::filesystem::path out = test::scratchDir("inverse_distortion", "pictures") / "fixed_point_iterations_k1_-0.5.png";
   writeImageAtomic(out, iterations);  // the thesis' appendix A picture, for a person to look at
   EXPECT_GT(s.fp_failed, 0);
   EXPECT_EQ(s.fp_diverged, 0);                // it is slow, not unstable: all failures are kNotConverged

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/error.h"
+#include "scratch.h"
 
 namespace fs = std::filesystem;
 
@@ -17,10 +18,7 @@ namespace previz {
 namespace {
 
 fs::path tmpDir(const std::string& name) {
-  const fs::path p = fs::path(PREVIZ_TEST_TMP) / "io_test" / name;
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::scratchDir("io_test", name);
 }
 
 std::vector<std::string> folderEntries(const fs::path& dir) {

@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "scratch.h"
 
 namespace fs = std::filesystem;
 
@@ -16,10 +17,7 @@ namespace previz {
 namespace {
 
 fs::path tmpDir(const std::string& name) {
-  const fs::path p = fs::path(PREVIZ_TEST_TMP) / "rig_test" / name;
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::scratchDir("rig_test", name);
 }
 
 Rig sampleRig() {

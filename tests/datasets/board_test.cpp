@@ -21,6 +21,7 @@
 #include "core/board.h"
 #include "core/error.h"
 #include "datasets/studio.h"
+#include "scratch.h"
 
 namespace previz::synth {
 namespace {
@@ -133,7 +134,7 @@ TEST(BoardSpec, JsonRoundTripAndFileRoundTrip) {
     EXPECT_EQ(back.first_id, spec.first_id);
     EXPECT_EQ(back.legacy_pattern, spec.legacy_pattern);
     EXPECT_EQ(back.margin_m, spec.margin_m);
-    const fs::path path = fs::path(PREVIZ_TEST_TMP) / "board_test" / (std::string(toString(type)) + ".json");
+    const fs::path path = test::scratchDir("board_test", "specs") / (std::string(toString(type)) + ".json");
     writeBoard(spec, path);
     const BoardSpec file = readBoard(path);
     EXPECT_EQ(boardToJson(file), boardToJson(spec));

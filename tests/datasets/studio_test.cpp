@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "datasets/detail/studio_detail.h"
 #include "datasets/studio.h"
+#include "scratch.h"
 
 namespace previz::synth {
 namespace {
@@ -27,9 +28,7 @@ constexpr double kPi = 3.14159265358979323846;
 StudioConfig defaultConfig() { return StudioConfig{}; }
 
 fs::path tmpDir(const std::string& name) {
-  const fs::path dir = fs::path(PREVIZ_TEST_TMP) / "studio_test" / name;
-  fs::create_directories(dir);
-  return dir;
+  return test::scratchDir("studio_test", name);
 }
 
 // Signed distance from p to a capsule's surface.

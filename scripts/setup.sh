@@ -11,7 +11,7 @@ jobs="${PREVIZ_JOBS:-$(nproc)}"
 packages=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libceres-dev libopencv-dev libopencv-contrib-dev libopenexr-dev
-  nlohmann-json3-dev libcli11-dev libapriltag-dev
+  nlohmann-json3-dev libcli11-dev libapriltag-dev libpcl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 

@@ -1,0 +1,67 @@
+#pragma once
+// A rig capture rendered on demand, in memory: the rig preset's board waved through the volume
+// (then lying on the floor), seen by every camera of the studio rig. What multicam's tests and
+// benchmarks detect and solve on, without writing thousands of PNGs.
+//
+// Speed: the rig preset's stage is static, so each camera's empty stage is rendered once and
+// cached; a frame ray-traces only the board's image region (printed board + margin + a border)
+// and pastes it over the cached background, then adds the frame's noise over the whole image.
+// The pixels inside the region are those of a full render (same sample pattern per pixel).
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/board.h"
+#include "core/rig.h"
+#include "datasets/rigs.h"
+
+namespace previz::synth {
+
+struct RigCaptureOptions {
+  StudioRigOptions rig;                 // cameras (8 witnesses 1280x720 + main 1920x1080)
+  BoardType board = BoardType::kAprilGrid;   // rigBoard(board)
+  int frames = 300;                     // the last floorBoardFrameCount(frames) are floor frames
+  std::uint64_t board_seed = 1;         // board trajectory: a new capture is a new seed
+  int samples_per_pixel = 4;
+  double noise_sigma = 2.0;             // grey levels
+  double blur_sigma_px = 0.0;
+  // Camera name -> frames late: its frame f shows the board of frame f - delay (clamped at 0).
+  std::map<std::string, int> delay_frames;
+  // Camera name -> motion applied to its true pose: T_world_cam' = T_world_cam * bump
+  // (a knocked camera turns about its own centre and shifts).
+  std::map<std::string, Pose> bump;
+  bool floor_frames = true;             // false: every frame waves the board (re-survey capture)
+  int threads = 0;                      // OpenMP threads for rendering (0 = default)
+};
+
+class RigCapture {
+ public:
+  explicit RigCapture(const RigCaptureOptions& options);  // throws Error naming a bad option
+  ~RigCapture();
+  RigCapture(const RigCapture&) = delete;
+  RigCapture& operator=(const RigCapture&) = delete;
+
+  const Rig& rig() const;            // true rig of this capture (bumps applied)
+  const BoardSpec& board() const;    // rigBoard(options.board)
+  int frames() const;
+  bool isFloorFrame(int frame) const;
+  Pose floorBoardPose() const;       // T_world_board in floor frames
+  // Board pose the camera sees in its frame 'frame' (its delay applied).
+  Pose T_world_board(int camera, int frame) const;
+
+  // Camera 'camera' (index into rig().cameras), frame 'frame': 8-bit BGR, full size, noise
+  // drawn from (seed, camera, frame). Thread-safe.
+  cv::Mat render(int camera, int frame) const;
+  // The board points the camera really sees in that frame (visibleBoardPoints), exact pixels.
+  std::vector<BoardObservation> truth(int camera, int frame) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace previz::synth

@@ -1,0 +1,29 @@
+#pragma once
+// The picture of a calibrated stage a technical director checks: top view and side view with
+// every camera's frustum and name, the floor board, and a heat map of how many cameras see
+// each floor cell at a given height.
+#include <filesystem>
+#include <optional>
+
+#include "core/rig.h"
+#include "multicam/observations.h"
+
+namespace previz::multicam {
+
+struct RigPictureOptions {
+  double coverage_height_m = 1.0;   // height of the coverage slice
+  double cell_m = 0.1;              // coverage cell size
+  double half_extent_m = 0;         // drawn area +-extent around the origin (0 = fit the cameras)
+  double frustum_m = 0.8;           // drawn frustum depth
+  int width_px = 1600;
+};
+
+// Coverage: number of cameras whose image contains the point (x, y, height) in front of them,
+// on a grid of cell_m over [-extent, extent]^2; row 0 = largest y (north up).
+cv::Mat coverageGrid(const Rig& rig, double half_extent_m, double cell_m, double height_m);
+
+// Writes <stem>.png and <stem>.svg (atomic). floor: drawn when given.
+void writeRigPicture(const Rig& rig, const FloorSpec* floor, const std::filesystem::path& stem,
+                     const RigPictureOptions& options = {});
+
+}  // namespace previz::multicam

@@ -11,20 +11,13 @@
 #include <Eigen/Core>
 
 #include "core/board.h"
+#include "core/mesh.h"
 #include "core/pose.h"
 #include "datasets/scene.h"
 
 namespace previz::synth {
 
-struct TriangleMesh {
-  std::vector<Eigen::Vector3f> vertices;  // world, metres
-  std::vector<Eigen::Vector3f> normals;   // per vertex, unit
-  std::vector<Eigen::Vector3i> faces;     // counter-clockwise seen from outside
-};
-// Atomic writers (binary little-endian PLY; OBJ with vertex normals). World frame, metres, z up.
-void writePly(const TriangleMesh& mesh, const std::filesystem::path& path);
-void writeObj(const TriangleMesh& mesh, const std::filesystem::path& path);
-TriangleMesh readPly(const std::filesystem::path& path);
+using previz::TriangleMesh;
 // Nearest ray–mesh intersection (Möller–Trumbore, brute force; for tests). +inf if none.
 double intersectMesh(const TriangleMesh& mesh, const Ray& ray);
 

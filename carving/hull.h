@@ -1,0 +1,94 @@
+#pragma once
+// Visual hull of the actor from the witness silhouettes: coarse-to-fine carving of a sparse cell
+// hierarchy, k-of-n tolerance, per-pixel depth for any rig camera, and the hull surface as a
+// mesh. One Carver per rig (it precomputes per-camera lookups once); carve() per frame.
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "core/mesh.h"
+#include "core/rig.h"
+
+namespace previz::carving {
+
+struct HullOptions {
+  // Stage volume carved (world, metres).
+  Eigen::AlignedBox3d volume{Eigen::Vector3d(-2.0, -2.0, 0.0), Eigen::Vector3d(2.0, 2.0, 2.5)};
+  double voxel_m = 0.005;   // finest cell edge
+  // A cell survives if it lies outside the silhouette in at most k of the cameras that see it.
+  // Cameras that do not see a cell (outside their image) never carve it.
+  int k = 0;
+  // A cell must be seen by at least this many cameras to survive (guards the volume's edge).
+  int min_views = 2;
+  int threads = 0;          // OpenMP threads (0 = default)
+  void validate() const;    // throws Error naming the field
+};
+
+// One camera's input for one frame: silhouette (CV_8UC1, > 127 = inside, the camera's full
+// image size). Empty = the camera is dropped for this frame (missing or bad frame).
+struct Silhouettes {
+  std::vector<cv::Mat> masks;          // order of the rig's cameras used by the Carver
+  std::vector<std::string> dropped;    // reasons, same order ("" = used)
+};
+
+// A cell of the hierarchy: edge voxel_m * 2^level, min corner origin + index * edge.
+struct HullCell {
+  Eigen::Vector3i index;
+  int level = 0;
+};
+
+struct HullStats {
+  std::vector<long long> cells_tested;  // per level, coarsest first
+  long long surface_cells = 0;          // finest-level cells the surface crosses
+  long long inside_cells = 0;           // cells wholly inside (any level)
+  double ms = 0;
+  std::vector<std::string> cameras_used, cameras_dropped;
+};
+
+struct VisualHull {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();   // = options.volume.min()
+  double voxel_m = 0;
+  int levels = 0;                    // level 0 = finest
+  std::vector<HullCell> inside;      // wholly inside, any level
+  std::vector<HullCell> surface;     // level 0 cells neither wholly inside nor wholly outside
+  HullStats stats;
+  bool empty() const { return inside.empty() && surface.empty(); }
+};
+
+class Carver {
+ public:
+  // cameras: the witness cameras carving uses (any subset of a rig, each with its distortion).
+  Carver(std::vector<RigCamera> cameras, const HullOptions& options = {});
+  ~Carver();
+  Carver(const Carver&) = delete;
+  Carver& operator=(const Carver&) = delete;
+
+  const std::vector<RigCamera>& cameras() const;
+  const HullOptions& options() const;
+
+  // Carves one frame. Throws Error naming the camera when a mask has the wrong size/type;
+  // a dropped camera is reported in stats.cameras_dropped, never fatal (fewer than 2 cameras
+  // left: empty hull, reported).
+  VisualHull carve(const Silhouettes& silhouettes);
+
+  // Exact point test against the silhouettes of the last carve() (k-of-n rule as above).
+  bool inside(const Eigen::Vector3d& p_world) const;
+
+  // Depth for a camera (usually the main one): for every pixel inside 'silhouette' (CV_8UC1, or
+  // empty = every pixel), the metric depth (z along the camera axis) of the first hull surface
+  // along the pixel's ray, refined below the cell size by bisection against the silhouettes.
+  // CV_32FC1, +inf where the ray misses the hull.
+  cv::Mat depth(const VisualHull& hull, const RigCamera& camera, const cv::Mat& silhouette) const;
+
+  // Surface mesh of the hull (marching cubes over the surface cells with the exact point test
+  // refined on the edges, smoothed vertices, outward normals).
+  TriangleMesh mesh(const VisualHull& hull) const;
+
+ private:
+  struct Impl;
+  Impl* impl_;
+};
+
+}  // namespace previz::carving

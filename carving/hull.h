@@ -2,6 +2,7 @@
 // Visual hull of the actor from the witness silhouettes: coarse-to-fine carving of a sparse cell
 // hierarchy, k-of-n tolerance, per-pixel depth for any rig camera, and the hull surface as a
 // mesh. One Carver per rig (it precomputes per-camera lookups once); carve() per frame.
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -88,7 +89,7 @@ class Carver {
 
  private:
   struct Impl;
-  Impl* impl_;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace previz::carving

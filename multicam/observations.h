@@ -2,6 +2,7 @@
 // What the rig solve reads: every camera's board detections in every frame of a rig take,
 // plus which frames show the floor board that fixes the world frame.
 // Pixels follow docs/conventions.md ((0,0) = centre of the top-left pixel).
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -28,7 +29,12 @@ struct FloorSpec {
   std::vector<int> frames;
   Pose T_world_board = defaultFloorPose();
 
-  static Pose defaultFloorPose();
+  // Half turn about x: world = board frame turned face up.
+  static Pose defaultFloorPose() {
+    Pose T = Pose::Identity();
+    T.linear() = Eigen::Vector3d(1, -1, -1).asDiagonal();
+    return T;
+  }
 };
 FloorSpec readFloor(const std::filesystem::path& path);  // throws Error naming file and field
 void writeFloor(const FloorSpec& floor, const std::filesystem::path& path);  // board inline
@@ -50,9 +56,16 @@ struct RigObservations {
   FloorSpec floor;
   std::vector<CameraDetections> cameras;
 
-  bool isFloorFrame(int frame) const;
+  bool isFloorFrame(int frame) const {
+    return has_floor && std::find(floor.frames.begin(), floor.frames.end(), frame) != floor.frames.end();
+  }
   const BoardSpec& boardOf(int frame) const { return isFloorFrame(frame) ? floor.board : board; }
-  const CameraDetections* find(const std::string& camera) const;
+  const CameraDetections* find(const std::string& camera) const {
+    for (const CameraDetections& c : cameras) {
+      if (c.camera == camera) return &c;
+    }
+    return nullptr;
+  }
 };
 
 nlohmann::json observationsToJson(const RigObservations& obs);

@@ -1,6 +1,10 @@
 // previz synth: render a synthetic take (studio, intrinsics or rig preset) with ground truth.
+#include <cmath>
 #include <iostream>
+#include <sstream>
+#include <vector>
 
+#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
@@ -20,8 +24,83 @@ struct SynthArgs {
   bool quiet = false;
   bool static_main = false;
   bool no_meshes = false;
+  bool no_floor = false;
+  std::vector<std::string> delays;
+  std::vector<std::string> bumps;
+  std::uint64_t board_seed = 0;
+  CLI::Option* board_seed_option = nullptr;
   synth::SynthOptions options;
 };
+
+[[noreturn]] void badFlag(const std::string& flag, const std::string& message) {
+  ErrorContext context;
+  context.field = flag;
+  throw Error(flag + ": " + message, context);
+}
+
+// "NAME=VALUE" -> (NAME, VALUE); throws Error naming the flag otherwise.
+std::pair<std::string, std::string> splitNamed(const std::string& text, const std::string& flag,
+                                               const std::string& form) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size()) {
+    badFlag(flag, "expected " + form + " (got '" + text + "')");
+  }
+  return {text.substr(0, eq), text.substr(eq + 1)};
+}
+
+// Comma-separated finite numbers, exactly 'count' of them.
+std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& flag,
+                                 const std::string& form) {
+  std::vector<double> values;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    try {
+      size_t used = 0;
+      const double v = std::stod(item, &used);
+      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument(item);
+      values.push_back(v);
+    } catch (const std::exception&) {
+      badFlag(flag, "expected " + form + " (got '" + text + "')");
+    }
+  }
+  if (values.size() != count) badFlag(flag, "expected " + form + " (got '" + text + "')");
+  return values;
+}
+
+// --delay NAME=FRAMES
+void parseDelay(const std::string& text, synth::SynthOptions& o) {
+  const std::string form = "NAME=FRAMES, e.g. witness03=2";
+  const auto [name, value] = splitNamed(text, "--delay", form);
+  int frames = 0;
+  try {
+    size_t used = 0;
+    frames = std::stoi(value, &used);
+    if (used != value.size()) throw std::invalid_argument(value);
+  } catch (const std::exception&) {
+    badFlag("--delay", "expected " + form + " (got '" + text + "')");
+  }
+  o.delay_frames[name] = frames;
+}
+
+// --bump NAME=DX,DY,DZ,RX,RY,RZ: metres and a rotation vector in degrees, both in the camera's
+// own frame (x right, y down, z forward): T_world_cam' = T_world_cam * bump.
+void parseBump(const std::string& text, synth::SynthOptions& o) {
+  const std::string form = "NAME=DX,DY,DZ,RX,RY,RZ (metres, degrees), e.g. witness02=0.01,0,0,0,0.5,0";
+  const auto [name, value] = splitNamed(text, "--bump", form);
+  std::vector<double> v;
+  try {
+    v = parseNumbers(value, 6, "--bump", form);
+  } catch (const Error&) {
+    badFlag("--bump", "expected " + form + " (got '" + text + "')");
+  }
+  const Eigen::Vector3d rotation_deg(v[3], v[4], v[5]);
+  const double angle = rotation_deg.norm() * M_PI / 180.0;
+  Pose bump = Pose::Identity();
+  if (angle > 0) bump.linear() = Eigen::AngleAxisd(angle, rotation_deg.normalized()).toRotationMatrix();
+  bump.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
+  o.bump[name] = bump;
+}
 
 }  // namespace
 
@@ -59,6 +138,16 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_option("--threads", o.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
   cmd->add_flag("--static-main", args->static_main, "Keep the main camera fixed (no dolly move)");
   cmd->add_flag("--no-meshes", args->no_meshes, "Do not write truth/mesh/actor.*");
+  cmd->add_option("--delay", args->delays,
+                  "Rig preset: NAME=FRAMES, camera NAME's frame f shows the board of frame f - FRAMES "
+                  "(repeatable)");
+  cmd->add_option("--bump", args->bumps,
+                  "Rig preset: NAME=DX,DY,DZ,RX,RY,RZ, camera NAME truly stands at T_world_cam * bump "
+                  "(metres; rotation vector in degrees; camera frame; repeatable)");
+  args->board_seed_option = cmd->add_option("--board-seed", args->board_seed,
+                  "Rig preset: seed of the board's path (default: --seed)");
+  cmd->add_flag("--no-floor", args->no_floor,
+                "Rig preset: every frame waves the board (no floor frames, no floor.json)");
   cmd->add_flag("--json", args->json, "Print a JSON summary on stdout");
   cmd->add_flag("--quiet", args->quiet, "No progress line");
 
@@ -67,6 +156,10 @@ Runner addSynthCommand(CLI::App& app) {
     o.preset = synth::presetFromString(args->preset);
     o.main_dolly = !args->static_main;
     o.write_meshes = !args->no_meshes;
+    for (const std::string& d : args->delays) parseDelay(d, o);
+    for (const std::string& b : args->bumps) parseBump(b, o);
+    if (args->board_seed_option->count() > 0) o.board_seed = args->board_seed;
+    o.floor_frames = !args->no_floor;
     if (!args->size.empty()) {
       const auto [w, h] = parseSize(args->size, "--size");
       const double scale = static_cast<double>(w) / o.witness_width;

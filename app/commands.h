@@ -14,7 +14,9 @@ Runner addSynthCommand(CLI::App& app);
 Runner addDemoCommand(CLI::App& app);
 Runner addCameraCommand(CLI::App& app);
 Runner addCalibCommand(CLI::App& app);
+Runner addRigCommand(CLI::App& app);
 // `previz calib lens`, registered under the calib command.
 Runner addLensCommand(CLI::App& calib);
+Runner addCarveCommand(CLI::App& app);
 
 }  // namespace previz::app

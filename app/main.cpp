@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   add("synth", previz::app::addSynthCommand);
   add("camera", previz::app::addCameraCommand);
   add("calib", previz::app::addCalibCommand);
+  add("carve", previz::app::addCarveCommand);
+  add("rig", previz::app::addRigCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");
 

@@ -2,6 +2,11 @@
 // Visual hull of the actor from the witness silhouettes: coarse-to-fine carving of a sparse cell
 // hierarchy, k-of-n tolerance, per-pixel depth for any rig camera, and the hull surface as a
 // mesh. One Carver per rig (it precomputes per-camera lookups once); carve() per frame.
+// Cameras keep their true distortion: cell corners are projected through the lens (with a
+// bound on the curvature of the footprint), never the silhouettes undistorted
+// (carving/detail/hull_camera.h says why). The "exact" hull is the one of the pixel masks: a
+// point is inside a silhouette when the pixel its projection falls in (OpenCV centre
+// convention) is > 127. Conventions: docs/conventions.md.
 #include <memory>
 #include <string>
 #include <vector>
@@ -13,6 +18,10 @@
 #include "core/rig.h"
 
 namespace previz::carving {
+
+namespace detail {
+struct HullData;  // silhouettes of the frame + cell lookup (carving/detail/hull_data.h)
+}
 
 struct HullOptions {
   // Stage volume carved (world, metres).
@@ -29,12 +38,17 @@ struct HullOptions {
 
 // One camera's input for one frame: silhouette (CV_8UC1, > 127 = inside, the camera's full
 // image size). Empty = the camera is dropped for this frame (missing or bad frame).
+// Dropped cameras are reported in HullStats::cameras_dropped with their reason.
 struct Silhouettes {
   std::vector<cv::Mat> masks;          // order of the rig's cameras used by the Carver
-  std::vector<std::string> dropped;    // reasons, same order ("" = used)
+  // Optional (empty, or one per camera): a non-empty reason drops the camera even when its
+  // mask is given (a frame the caller flagged bad); "" = used when its mask is not empty.
+  std::vector<std::string> dropped;
 };
 
-// A cell of the hierarchy: edge voxel_m * 2^level, min corner origin + index * edge.
+// A cell of the hierarchy: edge voxel_m * 2^level, min corner origin + index * edge. Cells that
+// touch the volume's boundary are never "inside" (they end up as surface cells), so the mesh
+// closes the hull there (e.g. the feet on the floor at z = 0).
 struct HullCell {
   Eigen::Vector3i index;
   int level = 0;
@@ -44,8 +58,9 @@ struct HullStats {
   std::vector<long long> cells_tested;  // per level, coarsest first
   long long surface_cells = 0;          // finest-level cells the surface crosses
   long long inside_cells = 0;           // cells wholly inside (any level)
-  double ms = 0;
+  double ms = 0;                        // wall time of carve()
   std::vector<std::string> cameras_used, cameras_dropped;
+  std::vector<std::string> drop_reasons;  // same order as cameras_dropped
 };
 
 struct VisualHull {
@@ -55,6 +70,9 @@ struct VisualHull {
   std::vector<HullCell> inside;      // wholly inside, any level
   std::vector<HullCell> surface;     // level 0 cells neither wholly inside nor wholly outside
   HullStats stats;
+  // What depth(), mesh() and inside(hull, p) need: this frame's silhouettes (shared, not
+  // copied) and the cells in a lookup structure. A hull stays valid after later carve() calls.
+  std::shared_ptr<const detail::HullData> data;
   bool empty() const { return inside.empty() && surface.empty(); }
 };
 
@@ -74,17 +92,26 @@ class Carver {
   // left: empty hull, reported).
   VisualHull carve(const Silhouettes& silhouettes);
 
-  // Exact point test against the silhouettes of the last carve() (k-of-n rule as above).
+  // Exact point test against the silhouettes of the last carve() (k-of-n rule as above);
+  // false outside the volume and before any carve().
   bool inside(const Eigen::Vector3d& p_world) const;
+  // The same against the silhouettes of a given hull.
+  bool inside(const VisualHull& hull, const Eigen::Vector3d& p_world) const;
 
-  // Depth for a camera (usually the main one): for every pixel inside 'silhouette' (CV_8UC1, or
-  // empty = every pixel), the metric depth (z along the camera axis) of the first hull surface
-  // along the pixel's ray, refined below the cell size by bisection against the silhouettes.
-  // CV_32FC1, +inf where the ray misses the hull.
+  // Depth for a camera (usually the main one, any pose and lens): for every pixel inside
+  // 'silhouette' (CV_8UC1 > 127, or empty = every pixel), the metric depth (z along the camera
+  // axis) of the first hull surface along the pixel's ray through the true lens: the ray walks
+  // the kept cells, samples the exact point test in surface cells every half cell and finds the
+  // crossing below that (pixel-edge crossing in the witness images, or bisection): the exact
+  // visual hull of the masks to well under a millimetre. CV_32FC1, +inf where the ray misses.
+  // The first call per lens builds its per-pixel ray table (~0.2 s at 1920x1080), then reused.
   cv::Mat depth(const VisualHull& hull, const RigCamera& camera, const cv::Mat& silhouette) const;
 
-  // Surface mesh of the hull (marching cubes over the surface cells with the exact point test
-  // refined on the edges, smoothed vertices, outward normals).
+  // Surface mesh of the hull: surface nets over the surface cells (one vertex per cell the
+  // surface crosses, at the mean of its edges' crossings, each found by bisection with the
+  // exact point test; one quad per crossed lattice edge, split along its shorter diagonal),
+  // Taubin-smoothed vertices, area-weighted outward normals. Closed where the cell field is
+  // (the volume's boundary counts as outside); ambiguous cells may give non-manifold edges.
   TriangleMesh mesh(const VisualHull& hull) const;
 
  private:

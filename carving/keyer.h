@@ -3,56 +3,134 @@
 // suppression of the main plate for the compositor. The screen colour is estimated per camera,
 // from a clean plate when given, else from the frame itself; the key is robust to uneven light
 // and to the actor's shadows on the floor (a shadowed screen is still screen).
+//
+// How a pixel is decided (keyer.cpp has the details):
+//  1. One pass classifies every pixel as screen, garbage, foreground or unknown. Screen is judged
+//     on chroma normalised by brightness, q = (G - max(R, B)) / G in linear light, which a shadow
+//     (a scale of the screen colour) leaves unchanged; computed on the 8-bit codes (SIMD).
+//     Garbage is what lies beyond the screen (the dark studio over a cyclorama; in the synthetic
+//     studio a third of some witnesses' actor pixels stand in front of it): with a clean plate,
+//     the plate's non-screen region connected to the border, keyed by difference against the
+//     plate; without one, pixels of the colour of the non-screen band along the image border,
+//     connected to the border through such pixels (so the actor in front of it is kept) or to
+//     the zone remembered from earlier frames (gaps the actor encloses).
+//  2. Pixels at a transition (unknown, or a neighbour of another class) get a two-colour alpha:
+//     the local background B (mean of the background neighbours, or the plate scaled by the
+//     neighbours' shadow factor) and the best-fitting pure foreground neighbour F; alpha is the
+//     projection of C - B on F - B in linear light (how anti-aliasing and lenses mix).
+//  3. Silhouette = alpha >= threshold; a pixel near one half is decided by its 3 x 3 mean alpha
+//     (for a straight edge that tells on which side the pixel's centre lies, its own alpha does
+//     not). Then connected components: specks and holes smaller than the options' sizes are
+//     removed / filled (no morphological opening: thin limbs survive).
+// One Keyer per camera: the screen model is estimated once (plate or first frame) and reused; a
+// Keyer keeps per-camera state and scratch, so key cameras in parallel with one Keyer each.
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
 namespace previz::carving {
 
 struct KeyerOptions {
-  // Silhouette = alpha above this after cleaning.
+  // Silhouette = alpha at or above this after cleaning.
   double silhouette_threshold = 0.5;
   // Connected specks of the silhouette smaller than this (px) are removed, and holes smaller than
   // this are filled; thin limbs are never eroded (no opening).
   int min_blob_px = 64;
   int min_hole_px = 64;
-  // Garbage matte: pixels that are not screen-like AND connected to the image border through
-  // non-screen pixels only (studio walls, rigging above the cyclorama) are dropped.
+  // Garbage matte: pixels that are not screen, look like the non-screen surroundings (studio
+  // walls, rigging above the cyclorama) AND are connected to the image border through such
+  // pixels are background. With a clean plate: the plate's border-connected non-screen region,
+  // keyed by difference against the plate.
   bool garbage_matte = true;
+  // Without a clean plate: remember the garbage zone found in earlier frames of this camera, so
+  // that the surroundings seen through a gap enclosed by the actor are keyed once they have been
+  // seen connected to the border. For static cameras; set false for a moving camera.
+  bool remember_garbage_zone = true;
+  // Half-size of the window (px) in which an edge pixel looks for its pure foreground and
+  // background colours; 2 covers a 1-px anti-aliased edge plus ~1 px of defocus.
+  int edge_radius_px = 2;
+  // Difference (8-bit levels, max over channels) below which a pixel equals the clean plate in
+  // the plate's garbage region; raise it with sensor noise (about 4 sigma).
+  int plate_tolerance = 10;
+  // Fill KeyResult::alpha (CV_32FC1). Carving needs only the silhouette: false saves writing
+  // the float image (~0.1 ms of a witness camera's ~2 ms, ~0.5 ms of the main camera's).
+  bool soft_alpha = true;
+  int threads = 0;  // OpenMP threads for one key() call (0 = OpenMP's default)
   void validate() const;  // throws Error naming the field
+};
+
+// Colour of the non-screen surroundings seen along the image border (no clean plate): linear
+// chromaticity r = R / S, b = B / S with S = R + G + B, and the brightest S it reaches.
+struct GarbageModel {
+  bool valid = false;
+  float r = 0, b = 0;        // median chromaticity
+  float tolerance = 0;       // accepted |r - r0|, |b - b0|
+  float max_sum = 0;         // brightest accepted S (linear)
 };
 
 // What the keyer knows about one camera's screen (estimated once per camera, then reused).
 struct ScreenModel {
-  cv::Vec3f key_color;           // linear RGB of the lit screen, channel order B, G, R
-  cv::Mat illumination;          // optional per-pixel screen brightness (CV_32FC1, from a clean plate)
+  cv::Vec3f key_color;          // linear RGB of the lit screen, channel order B, G, R
+  float key_q = 0;              // (G - max(R, B)) / G of key_color: the screen's chroma
   bool from_clean_plate = false;
+  // Clean plate only: the plate (CV_8UC3); its linear green (CV_32FC1: the screen's
+  // illumination, uneven light and falloff included); the garbage zone (CV_8UC1, 255 =
+  // non-screen region connected to the border, dilated by the edge radius so the cyclorama's
+  // anti-aliased rim is keyed by difference too); and, per pixel, the 8-bit green range a frame
+  // pixel may have to be screen (CV_8UC2: darkest shadow .. slight brightening of the plate;
+  // min > max inside the garbage zone).
+  cv::Mat plate;
+  cv::Mat illumination;
+  cv::Mat garbage_zone;
+  cv::Mat plate_green_range;
+  GarbageModel garbage;         // no clean plate: re-estimated on every frame
+};
+
+struct KeyStats {
+  int unknown_px = 0;      // pixels given a two-colour alpha
+  int garbage_px = 0;      // pixels dropped by the garbage matte
+  int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
+  int holes_filled = 0;    // holes filled (smaller than min_hole_px)
 };
 
 struct KeyResult {
-  cv::Mat alpha;       // CV_32FC1 in [0, 1]: 1 = foreground
+  cv::Mat alpha;       // CV_32FC1 in [0, 1] (1 = foreground), 8-bit steps; empty if !soft_alpha
   cv::Mat silhouette;  // CV_8UC1, 255 inside, 0 outside
+  KeyStats stats;
 };
 
 class Keyer {
  public:
   explicit Keyer(const KeyerOptions& options = {});
-  // Screen model from a clean plate (the empty stage from this camera).
-  void setCleanPlate(const cv::Mat& bgr8);
-  // Estimated from the frame when no clean plate / model was set; 'source' names the frame in
-  // errors (wrong type, empty image).
+  // Screen model from a clean plate (the empty stage from this camera, CV_8UC3 sRGB). Frames
+  // keyed afterwards must have the plate's size. 'source' names the plate in errors.
+  void setCleanPlate(const cv::Mat& bgr8, const std::string& source = {});
+  // Keys one frame (CV_8UC3 sRGB, B G R). The screen model is estimated from this frame when no
+  // clean plate / model was set. 'source' names the frame in errors (wrong type, empty image,
+  // size unlike the plate's, no screen found).
   KeyResult key(const cv::Mat& bgr8, const std::string& source = {});
   const ScreenModel& screen() const { return screen_; }
   bool hasScreen() const { return has_screen_; }
+  const KeyerOptions& options() const { return options_; }
 
  private:
   KeyerOptions options_;
   ScreenModel screen_;
   bool has_screen_ = false;
+  cv::Mat garbage_memory_;  // CV_8UC1: garbage zone of earlier frames (no clean plate)
+  // Scratch reused from frame to frame (the hot loops allocate nothing).
+  cv::Mat classes_, alpha8_, need_rows_;
+  std::vector<std::vector<cv::Point>> band_refined_, band_seeds_;
 };
 
-// Spill suppression for the main plate: the screen's green cast removed from the foreground
-// (8-bit BGR in, 8-bit BGR out), given the camera's screen model.
-cv::Mat despill(const cv::Mat& bgr8, const ScreenModel& screen);
+// Spill suppression for the main plate (8-bit sRGB BGR in and out), given the frame's key (with
+// its soft alpha) and the camera's screen model: the
+// unpremultiplied foreground colour F, for the compositor's over (alpha F + (1 - alpha) CG).
+// Opaque pixels (alpha = 1) are unchanged; on the transition the screen's share is removed,
+// F = (C - (1 - alpha) B) / alpha in linear light, B the local screen colour as the keyer saw
+// it; where alpha = 0, F is C with green limited to max(R, B) (it is never seen).
+cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen,
+                const KeyerOptions& options = {});
 
 }  // namespace previz::carving

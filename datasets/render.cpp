@@ -1,7 +1,6 @@
 #include "datasets/render.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -9,10 +8,13 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "datasets/detail/render_kernel.h"
 #include "datasets/random.h"
 
 namespace previz::synth {
 namespace {
+
+using detail::threadCount;
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
@@ -21,8 +23,6 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
   context.field = field;
   throw Error("render: " + field + " " + message, context);
 }
-
-int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
 // The Brown model of core/camera.h, evaluated together with its Jacobian in one pass. The inner
 // loop inverts it for every sample; Camera::distort/distortJacobian return through two
@@ -127,6 +127,49 @@ inline bool invertFrom(const Camera& camera, const Brown& brown, double xd, doub
   return true;
 }
 
+// A pixel's rays through the true lens (K^-1, then the inverse Brown model), warm-started along
+// the row: the kernel that renderView, renderLinear and detail::SpanTracer share.
+struct Lens {
+  const Camera& camera;
+  Brown brown;
+  Intrinsics k;
+
+  explicit Lens(const Camera& c) : camera(c), brown(c), k(c) {}
+
+  // Solves the centre of pixel (u, v) from 'start' (the previous pixel's centre) into (x, y);
+  // 'start' becomes this centre, the warm start of its samples and of the next pixel.
+  bool centre(int u, int v, Start& start, double& x, double& y) const {
+    double xd, yd;
+    k.toNormalized(u, v, xd, yd);
+    const bool ok = invertFrom(camera, brown, xd, yd, start, x, y);
+    start = ok ? makeStart(brown, x, y, xd, yd) : Start{};
+    return ok;
+  }
+
+  // Calls ray(s, d_cam) for each sample s of pixel (u, v) in pattern order with its unit ray in
+  // the camera frame; samples past the fold are skipped (no light reaches that part of the
+  // sensor).
+  template <typename SampleRay>
+  void forEachSample(const std::vector<Eigen::Vector2d>& pattern, const Start& start, int u,
+                     int v, SampleRay&& ray) const {
+    const int spp = static_cast<int>(pattern.size());
+    for (int s = 0; s < spp; ++s) {
+      double xd, yd, x, y;
+      k.toNormalized(u + pattern[s].x(), v + pattern[s].y(), xd, yd);
+      if (!invertFrom(camera, brown, xd, yd, start, x, y)) continue;
+      const double inv = 1.0 / std::sqrt(x * x + y * y + 1.0);
+      ray(s, Eigen::Vector3d(x * inv, y * inv, inv));
+    }
+  }
+};
+
+// A pixel's mean linear RGB: the double sum over its samples times 'scale', in float.
+inline void storeMean(const Eigen::Vector3d& sum, float scale, float* rgb) {
+  rgb[0] = static_cast<float>(sum.x()) * scale;
+  rgb[1] = static_cast<float>(sum.y()) * scale;
+  rgb[2] = static_cast<float>(sum.z()) * scale;
+}
+
 // What one pixel needs from the scene, shared by renderView and renderLinear.
 struct PixelResult {
   Eigen::Vector3d rgb_sum = Eigen::Vector3d::Zero();
@@ -152,20 +195,35 @@ std::vector<Instant> makeInstants(const std::vector<ShutterSample>& shutter) {
   return out;
 }
 
+// What renderView and renderLinear set up alike (the camera and the shutter checked): the lens,
+// the sample pattern and the instants.
+struct Exposure {
+  Lens lens;
+  std::vector<Eigen::Vector2d> pattern;
+  std::vector<Instant> instants;
+  Instant centre;
+};
+
+Exposure makeExposure(const Camera& camera, const std::vector<ShutterSample>& shutter,
+                      const ShutterSample& centre, int samples_per_pixel) {
+  camera.validate();
+  if (centre.scene == nullptr) fail("centre", "has no scene");
+  return {Lens(camera), samplePattern(samples_per_pixel), makeInstants(shutter),
+          {centre.scene, centre.T_world_cam.rotation(), centre.T_world_cam.translation()}};
+}
+
 // The per-row kernel: samples + (optionally) the truth ray of every pixel of row v.
 template <typename PixelSink>
-void renderRow(const Camera& camera, const Brown& brown, const Intrinsics& k,
-               const std::vector<Eigen::Vector2d>& pattern, const std::vector<Instant>& instants,
-               const Instant& centre, bool truth, int v, PixelSink&& sink) {
+void renderRow(const Exposure& exposure, bool truth, int v, PixelSink&& sink) {
+  const Lens& lens = exposure.lens;
+  const std::vector<Instant>& instants = exposure.instants;
+  const Instant& centre = exposure.centre;
   const int n_instants = static_cast<int>(instants.size());
-  const int spp = static_cast<int>(pattern.size());
   Start start;  // the previous pixel's centre: warm start along the row
-  for (int u = 0; u < camera.width; ++u) {
+  for (int u = 0; u < lens.camera.width; ++u) {
     PixelResult result;
-    double xd_c, yd_c, x_c = 0, y_c = 0;
-    k.toNormalized(u, v, xd_c, yd_c);
-    result.centre_ok = invertFrom(camera, brown, xd_c, yd_c, start, x_c, y_c);
-    start = result.centre_ok ? makeStart(brown, x_c, y_c, xd_c, yd_c) : Start{};
+    double x_c = 0, y_c = 0;
+    result.centre_ok = lens.centre(u, v, start, x_c, y_c);
     if (truth && result.centre_ok) {
       const double inv = 1.0 / std::sqrt(x_c * x_c + y_c * y_c + 1.0);
       const Eigen::Vector3d d_cam(x_c * inv, y_c * inv, inv);
@@ -176,37 +234,108 @@ void renderRow(const Camera& camera, const Brown& brown, const Intrinsics& k,
         result.cls = hit.cls;
       }
     }
-    int instant = (u + 2 * v) % n_instants;
-    for (int s = 0; s < spp; ++s, instant = instant + 1 == n_instants ? 0 : instant + 1) {
-      double xd, yd, x, y;
-      k.toNormalized(u + pattern[s].x(), v + pattern[s].y(), xd, yd);
-      if (!invertFrom(camera, brown, xd, yd, start, x, y)) {
-        continue;  // past the fold: no light reaches this part of the sensor
-      }
-      const Instant& in = instants[instant];
-      const double inv = 1.0 / std::sqrt(x * x + y * y + 1.0);
-      const Eigen::Vector3d d_cam(x * inv, y * inv, inv);
+    const int first = (u + 2 * v) % n_instants;
+    lens.forEachSample(exposure.pattern, start, u, v, [&](int s, const Eigen::Vector3d& d_cam) {
+      const Instant& in = instants[(first + s) % n_instants];
       Ray ray{in.origin, in.R * d_cam};
       Hit hit;
       in.scene->trace(ray, hit);
       result.rgb_sum += hit.rgb.cast<double>();
-    }
+    });
     sink(u, result);
   }
 }
 
-// Separable Gaussian on a float image (any channel count), clamp-to-edge borders. Each output
-// value is a fixed-order sum, so the result does not depend on the thread count.
-cv::Mat gaussianBlur(const cv::Mat& src, double sigma, int threads) {
-  const int radius = std::max(1, static_cast<int>(std::ceil(4.0 * sigma)));
-  std::vector<float> kernel(2 * radius + 1);
-  double sum = 0;
-  for (int i = -radius; i <= radius; ++i) {
-    kernel[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
-    sum += kernel[i + radius];
+// Scene::trace's lower bound on hit distances (datasets/scene.cpp kTMin).
+constexpr double kTraceMin = 1e-9;
+
+// The largest float not above t.
+inline float floatBelow(double t) {
+  float f = static_cast<float>(t);
+  if (static_cast<double>(f) > t) f = std::nextafter(f, 0.0f);
+  return f;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// detail: the pieces shared with the board presets' fast path (datasets/detail/render_kernel.h)
+
+namespace detail {
+
+int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
+
+struct SpanTracer::Impl {
+  Lens lens;
+  std::vector<Eigen::Vector2d> pattern;
+  Eigen::Matrix3d R;  // world <- camera
+  Eigen::Vector3d origin;
+  float scale;
+};
+
+SpanTracer::SpanTracer(const Camera& camera, const Pose& T_world_cam, int samples_per_pixel,
+                       double gain) {
+  std::vector<Eigen::Vector2d> pattern = samplePattern(samples_per_pixel);
+  const float scale = static_cast<float>(gain / pattern.size());  // as renderView's
+  impl_.reset(new Impl{Lens(camera), std::move(pattern), T_world_cam.rotation(),
+                       T_world_cam.translation(), scale});
+}
+
+SpanTracer::~SpanTracer() = default;
+
+void SpanTracer::traceRow(const Scene& scene, int v, int u0, int u1, float* rgb,
+                          const Primitive* board, const float* stage_t, float* least_t) const {
+  const Impl& m = *impl_;
+  Start start;  // the previous pixel's centre: warm start along the row
+  for (int u = u0; u <= u1; ++u) {
+    double x_c = 0, y_c = 0;
+    m.lens.centre(u, v, start, x_c, y_c);
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double least = std::numeric_limits<double>::infinity();
+    m.lens.forEachSample(m.pattern, start, u, v, [&](int, const Eigen::Vector3d& d_cam) {
+      Ray ray{m.origin, m.R * d_cam};
+      Hit hit;
+      if (board != nullptr) {
+        hit.t = stage_t[u];
+        if (board->intersect(ray, kTraceMin, hit)) {
+          board->shade(ray, hit);
+          sum += hit.rgb.cast<double>();
+          return;
+        }
+      }
+      scene.trace(ray, hit);
+      sum += hit.rgb.cast<double>();
+      least = std::min(least, hit.t);
+    });
+    if (least_t != nullptr) least_t[u] = floatBelow(least);
+    storeMean(sum, m.scale, rgb + 3 * (u - u0));
   }
-  for (float& w : kernel) w = static_cast<float>(w / sum);
-  const int rows = src.rows, cols = src.cols, ch = src.channels();
+}
+
+SrgbTable::SrgbTable() {
+  for (int i = 0; i <= kSize; ++i) {
+    table_[i] = static_cast<float>(255.0 * srgbEncode(static_cast<double>(i) / kSize));
+  }
+}
+
+const SrgbTable& srgbTable() {
+  static const SrgbTable table;
+  return table;
+}
+
+GaussianBlur::GaussianBlur(double sigma)
+    : radius_(std::max(1, static_cast<int>(std::ceil(4.0 * sigma)))) {
+  kernel_.resize(2 * radius_ + 1);
+  double sum = 0;
+  for (int i = -radius_; i <= radius_; ++i) {
+    kernel_[i + radius_] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
+    sum += kernel_[i + radius_];
+  }
+  for (float& w : kernel_) w = static_cast<float>(w / sum);
+}
+
+cv::Mat GaussianBlur::apply(const cv::Mat& src, int threads) const {
+  const int rows = src.rows, cols = src.cols, ch = src.channels(), r = radius_;
   cv::Mat tmp(src.size(), src.type()), dst(src.size(), src.type());
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int v = 0; v < rows; ++v) {
@@ -215,9 +344,9 @@ cv::Mat gaussianBlur(const cv::Mat& src, double sigma, int threads) {
     for (int u = 0; u < cols; ++u) {
       for (int c = 0; c < ch; ++c) {
         float acc = 0;
-        for (int i = -radius; i <= radius; ++i) {
+        for (int i = -r; i <= r; ++i) {
           const int uu = std::clamp(u + i, 0, cols - 1);
-          acc += kernel[i + radius] * in[uu * ch + c];
+          acc += kernel_[i + r] * in[uu * ch + c];
         }
         out[u * ch + c] = acc;
       }
@@ -227,44 +356,18 @@ cv::Mat gaussianBlur(const cv::Mat& src, double sigma, int threads) {
   for (int v = 0; v < rows; ++v) {
     float* out = dst.ptr<float>(v);
     for (int x = 0; x < cols * ch; ++x) out[x] = 0;
-    for (int i = -radius; i <= radius; ++i) {
+    for (int i = -r; i <= r; ++i) {
       const float* in = tmp.ptr<float>(std::clamp(v + i, 0, rows - 1));
-      const float w = kernel[i + radius];
+      const float w = kernel_[i + r];
       for (int x = 0; x < cols * ch; ++x) out[x] += w * in[x];
     }
   }
   return dst;
 }
 
-// sRGB encoding table: 8192 intervals over [0, 1], linear interpolation. Worst error about
-// 0.004 grey levels (near the knee at 0.0031), far below the 8-bit step.
-class SrgbTable {
- public:
-  static constexpr int kSize = 8192;
-  SrgbTable() {
-    for (int i = 0; i <= kSize; ++i) {
-      table_[i] = static_cast<float>(255.0 * srgbEncode(static_cast<double>(i) / kSize));
-    }
-  }
-  float encode255(float linear) const {
-    if (!(linear > 0.0f)) return 0.0f;
-    if (linear >= 1.0f) return table_[kSize];
-    const float x = linear * kSize;
-    const int i = static_cast<int>(x);
-    const float f = x - static_cast<float>(i);
-    return table_[i] + f * (table_[i + 1] - table_[i]);
-  }
+}  // namespace detail
 
- private:
-  std::array<float, kSize + 1> table_;
-};
-
-const SrgbTable& srgbTable() {
-  static const SrgbTable table;
-  return table;
-}
-
-}  // namespace
+// ---------------------------------------------------------------------------------------------
 
 void RenderOptions::validate() const {
   if (samples_per_pixel < 4) {
@@ -320,11 +423,10 @@ double srgbDecode(double encoded) {
 }
 
 bool pixelRay(const Camera& camera, const Eigen::Vector2d& px, Eigen::Vector3d& dir_cam) {
-  const Brown brown(camera);
-  const Intrinsics k(camera);
+  const Lens lens(camera);
   double xd, yd, x, y;
-  k.toNormalized(px.x(), px.y(), xd, yd);
-  if (!invertFrom(camera, brown, xd, yd, Start{}, x, y)) return false;
+  lens.k.toNormalized(px.x(), px.y(), xd, yd);
+  if (!invertFrom(camera, lens.brown, xd, yd, Start{}, x, y)) return false;
   dir_cam = Eigen::Vector3d(x, y, 1.0).normalized();
   return true;
 }
@@ -338,17 +440,10 @@ RenderedView renderView(const Camera& camera, const Pose& T_world_cam, const Sce
 RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& shutter,
                         const ShutterSample& centre, const RenderOptions& options) {
   options.validate();
-  camera.validate();
-  if (centre.scene == nullptr) fail("centre", "has no scene");
-  const std::vector<Instant> instants = makeInstants(shutter);
-  const Instant centre_instant{centre.scene, centre.T_world_cam.rotation(),
-                               centre.T_world_cam.translation()};
-  const std::vector<Eigen::Vector2d> pattern = samplePattern(options.samples_per_pixel);
-  const Brown brown(camera);
-  const Intrinsics k(camera);
+  const Exposure exposure = makeExposure(camera, shutter, centre, options.samples_per_pixel);
   const int threads = threadCount(options.threads);
   const int W = camera.width, H = camera.height;
-  const float scale = static_cast<float>(options.gain / pattern.size());
+  const float scale = static_cast<float>(options.gain / exposure.pattern.size());
 
   RenderedView view;
   cv::Mat linear(H, W, CV_32FC3);  // R, G, B
@@ -364,11 +459,9 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
     float* depth = options.truth ? view.depth.ptr<float>(v) : nullptr;
     std::uint8_t* labels = options.truth ? view.labels.ptr<std::uint8_t>(v) : nullptr;
     std::uint8_t* mask = options.truth ? view.mask.ptr<std::uint8_t>(v) : nullptr;
-    renderRow(camera, brown, k, pattern, instants, centre_instant, options.truth, v,
+    renderRow(exposure, options.truth, v,
               [&](int u, const PixelResult& p) {
-                rgb[3 * u + 0] = static_cast<float>(p.rgb_sum.x()) * scale;
-                rgb[3 * u + 1] = static_cast<float>(p.rgb_sum.y()) * scale;
-                rgb[3 * u + 2] = static_cast<float>(p.rgb_sum.z()) * scale;
+                storeMean(p.rgb_sum, scale, rgb + 3 * u);
                 if (!p.centre_ok) ++not_invertible;
                 if (depth != nullptr) {
                   depth[u] = p.depth;
@@ -379,18 +472,17 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
   }
   view.not_invertible = not_invertible;
 
-  if (options.blur_sigma_px > 0) linear = gaussianBlur(linear, options.blur_sigma_px, threads);
+  if (options.blur_sigma_px > 0) {
+    linear = detail::GaussianBlur(options.blur_sigma_px).apply(linear, threads);
+  }
 
-  const SrgbTable& table = srgbTable();
+  const detail::SrgbTable& table = detail::srgbTable();
   view.bgr.create(H, W, CV_8UC3);
   const double noise = options.noise_sigma;
   const std::uint64_t stream =
       hashKey(options.seed, static_cast<std::uint64_t>(options.camera_index),
               static_cast<std::uint64_t>(options.frame));
-  // Round half up after clamping to [0, 255]: the truncation of a non-negative value is its floor.
-  auto quantize = [](double value) {
-    return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0) + 0.5);
-  };
+  using detail::quantize255;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int v = 0; v < H; ++v) {
     const float* rgb = linear.ptr<float>(v);
@@ -401,12 +493,14 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
         for (int c = 0; c < 3; ++c) {
           const double value = table.encode255(rgb[3 * u + c]) +
                                noise * normalFromKey(hashKey(stream, pixel, c));
-          bgr[3 * u + (2 - c)] = quantize(value);
+          bgr[3 * u + (2 - c)] = quantize255(value);
         }
       }
     } else {
       for (int u = 0; u < W; ++u) {
-        for (int c = 0; c < 3; ++c) bgr[3 * u + (2 - c)] = quantize(table.encode255(rgb[3 * u + c]));
+        for (int c = 0; c < 3; ++c) {
+          bgr[3 * u + (2 - c)] = quantize255(table.encode255(rgb[3 * u + c]));
+        }
       }
     }
   }
@@ -419,16 +513,9 @@ LinearView renderLinear(const Camera& camera, const std::vector<ShutterSample>& 
   check.samples_per_pixel = samples_per_pixel;
   check.threads = threads;
   check.validate();
-  camera.validate();
-  if (centre.scene == nullptr) fail("centre", "has no scene");
-  const std::vector<Instant> instants = makeInstants(shutter);
-  const Instant centre_instant{centre.scene, centre.T_world_cam.rotation(),
-                               centre.T_world_cam.translation()};
-  const std::vector<Eigen::Vector2d> pattern = samplePattern(samples_per_pixel);
-  const Brown brown(camera);
-  const Intrinsics k(camera);
+  const Exposure exposure = makeExposure(camera, shutter, centre, samples_per_pixel);
   const int W = camera.width, H = camera.height;
-  const float scale = 1.0f / static_cast<float>(pattern.size());
+  const float scale = 1.0f / static_cast<float>(exposure.pattern.size());
 
   LinearView view;
   view.rgb.create(H, W, CV_32FC3);
@@ -437,11 +524,9 @@ LinearView renderLinear(const Camera& camera, const std::vector<ShutterSample>& 
   for (int v = 0; v < H; ++v) {
     float* rgb = view.rgb.ptr<float>(v);
     float* depth = view.depth.ptr<float>(v);
-    renderRow(camera, brown, k, pattern, instants, centre_instant, true, v,
+    renderRow(exposure, true, v,
               [&](int u, const PixelResult& p) {
-                rgb[3 * u + 0] = static_cast<float>(p.rgb_sum.x()) * scale;
-                rgb[3 * u + 1] = static_cast<float>(p.rgb_sum.y()) * scale;
-                rgb[3 * u + 2] = static_cast<float>(p.rgb_sum.z()) * scale;
+                storeMean(p.rgb_sum, scale, rgb + 3 * u);
                 depth[u] = p.depth;
               });
   }

@@ -281,7 +281,11 @@ Pose floorBoardPose() {
 
 Pose rigBoardPose(const BoardSpec& spec, int frame, int frames, std::uint64_t seed) {
   if (isFloorBoardFrame(frame, frames)) return floorBoardPose();
-  const int waved = std::max(1, frames - floorBoardFrameCount(frames));
+  return rigWavedBoardPose(spec, frame, std::max(1, frames - floorBoardFrameCount(frames)), seed);
+}
+
+Pose rigWavedBoardPose(const BoardSpec& spec, int frame, int waved_frames, std::uint64_t seed) {
+  const int waved = std::max(1, waved_frames);
   Rng take_rng(hashKey(seed, kStreamRigBoard));
   const double phase_x = take_rng.uniform(0.0, 2.0 * kPi);
   const double phase_y = take_rng.uniform(0.0, 2.0 * kPi);

@@ -78,6 +78,11 @@ BoardSpec rigBoard(BoardType type);
 int floorBoardFrameCount(int frames);
 bool isFloorBoardFrame(int frame, int frames);
 Pose rigBoardPose(const BoardSpec& spec, int frame, int frames, std::uint64_t seed);
+// The waving part of rigBoardPose on its own: frame 'frame' of a path spread over
+// 'waved_frames' frames (rigBoardPose(spec, f, frames, seed) equals
+// rigWavedBoardPose(spec, f, max(1, frames - floorBoardFrameCount(frames)), seed) in its waved
+// frames). A capture without floor frames (a re-survey) waves the board in every frame.
+Pose rigWavedBoardPose(const BoardSpec& spec, int frame, int waved_frames, std::uint64_t seed);
 // The floor board: lying face up with its board-frame origin (top-left outer corner of the
 // pattern) at the world origin, board x = world x, board y = -world y, board z = -world z
 // (a half turn about x), so world = board frame rotated a half turn about its x axis.

@@ -4,20 +4,24 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <map>
 #include <memory>
 #include <sstream>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <omp.h>
 
 #include "core/board.h"
 #include "core/distortion_maps.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "datasets/detail/board_view.h"
 #include "datasets/random.h"
 #include "datasets/render.h"
+#include "datasets/rig_capture.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
 
@@ -30,9 +34,11 @@ namespace fs = std::filesystem;
 constexpr int kTakeFormatVersion = 1;
 constexpr std::uint64_t kStreamGain = 401;
 
-[[noreturn]] void badOption(const std::string& field, const std::string& message) {
+[[noreturn]] void badOption(const std::string& field, const std::string& message,
+                            const std::string& camera = {}) {
   ErrorContext context;
   context.field = field;
+  context.camera = camera;
   throw Error("synth: " + field + " " + message, context);
 }
 
@@ -80,6 +86,8 @@ struct JsonLines {
 };
 
 nlohmann::json optionsToJson(const SynthOptions& o) {
+  nlohmann::json bumps = nlohmann::json::object();
+  for (const auto& [name, T] : o.bump) bumps[name] = poseToJson(T);
   return {{"preset", toString(o.preset)},
           {"frames", o.frames},
           {"witness_cameras", o.witness_cameras},
@@ -98,7 +106,11 @@ nlohmann::json optionsToJson(const SynthOptions& o) {
           {"cg_overscan", o.cg_overscan},
           {"board", o.board},
           {"camera", o.camera},
-          {"write_meshes", o.write_meshes}};
+          {"write_meshes", o.write_meshes},
+          {"board_seed", o.board_seed.value_or(o.seed)},
+          {"floor_frames", o.floor_frames},
+          {"delay_frames", o.delay_frames},
+          {"bump", bumps}};
 }
 
 nlohmann::json propsToJson(const std::vector<PropSpec>& props) {
@@ -131,6 +143,51 @@ struct TakeCamera {
   double gain = 1.0;  // brightness of this camera
   bool moving = false;  // main camera on the dolly
 };
+
+// A board preset's frames, camera by camera (RigCapture for the rig preset, one BoardView for
+// the intrinsics preset).
+struct BoardFrames {
+  std::function<cv::Mat(int camera, int frame)> render;
+  std::function<std::vector<BoardObservation>(int camera, int frame)> truth;
+  std::function<Pose(int camera, int frame)> T_world_board;
+  std::function<bool(int camera, int frame)> floor;
+};
+
+// Renders one frame of every camera of a board preset (in parallel over cameras; a single
+// camera renders in parallel itself), writes the plates and returns each camera's truth line
+// and render time. The first exception is rethrown after the parallel region.
+void renderBoardFrame(const BoardFrames& source, const std::vector<TakeCamera>& cameras, int f,
+                      double t, const fs::path& out, int threads,
+                      std::vector<nlohmann::json>& lines, std::vector<double>& ms) {
+  const int n = static_cast<int>(cameras.size());
+  lines.assign(n, nullptr);
+  ms.assign(n, 0.0);
+  std::vector<std::exception_ptr> errors(n);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads) if (n > 1)
+  for (int i = 0; i < n; ++i) {
+    try {
+      const std::string& name = cameras[i].rig.camera.name;
+      const Clock::time_point start = Clock::now();
+      const cv::Mat plate = source.render(i, f);
+      ms[i] = msSince(start);
+      writeImageAtomic(out / "cams" / name / frameFile(f, "png"), plate);
+      nlohmann::json points = nlohmann::json::array();
+      for (const BoardObservation& b : source.truth(i, f)) {
+        points.push_back({{"id", b.id}, {"x", b.px.x()}, {"y", b.px.y()}});
+      }
+      lines[i] = {{"frame", f},
+                  {"time_s", t},
+                  {"floor", source.floor(i, f)},
+                  {"T_world_board", poseToJson(source.T_world_board(i, f))},
+                  {"points", points}};
+    } catch (...) {  // never across the parallel region
+      errors[i] = std::current_exception();
+    }
+  }
+  for (const std::exception_ptr& e : errors) {
+    if (e) std::rethrow_exception(e);
+  }
+}
 
 }  // namespace
 
@@ -188,6 +245,31 @@ void SynthOptions::validate() const {
     badOption("camera", "must be main|witness (got '" + camera + "')");
   }
   if (threads < 0) badOption("threads", "must be >= 0 (got " + str(threads) + ")");
+  // Rig preset only: a knocked or late camera, another board path, no floor board.
+  if (preset != Preset::kRig) {
+    if (!delay_frames.empty()) badOption("delay_frames", "applies to the rig preset only");
+    if (!bump.empty()) badOption("bump", "applies to the rig preset only");
+    if (board_seed) badOption("board_seed", "applies to the rig preset only");
+    if (!floor_frames) badOption("floor_frames", "applies to the rig preset only");
+  }
+  auto known = [&](const std::string& name) {
+    if (name == "main") return true;
+    for (int i = 0; i < witness_cameras; ++i) {
+      if (witnessName(i) == name) return true;
+    }
+    return false;
+  };
+  for (const auto& [name, frames_late] : delay_frames) {
+    if (!known(name)) badOption("delay_frames", "names no camera of the take: '" + name + "'", name);
+    if (std::abs(frames_late) >= std::max(1, this->frames)) {
+      badOption("delay_frames", "of '" + name + "' must be shorter than the take (got " +
+                                    str(frames_late) + " frames)", name);
+    }
+  }
+  for (const auto& [name, T] : bump) {
+    if (!known(name)) badOption("bump", "names no camera of the take: '" + name + "'", name);
+    if (!T.matrix().allFinite()) badOption("bump", "of '" + name + "' is not finite", name);
+  }
 }
 
 SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
@@ -246,6 +328,62 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
     if (c.rig.role == "main") main_camera = &c;
   }
 
+  // Board presets: the stage is static, so each camera renders its empty stage once and then
+  // only the board's part of the image (datasets/detail/board_view.h).
+  const int threads = o.threads > 0 ? o.threads : omp_get_max_threads();
+  std::unique_ptr<RigCapture> capture;
+  std::unique_ptr<detail::BoardView> intrinsics_view;
+  BoardFrames board_frames;
+  if (o.preset == Preset::kRig) {
+    RigCaptureOptions ro;
+    ro.rig = rig_options;
+    ro.board = board_type;
+    ro.frames = o.frames;
+    ro.board_seed = o.board_seed.value_or(o.seed);
+    ro.samples_per_pixel = o.samples_per_pixel;
+    ro.noise_sigma = o.noise_sigma;
+    ro.blur_sigma_px = o.blur_sigma_px;
+    ro.delay_frames = o.delay_frames;
+    ro.bump = o.bump;
+    ro.floor_frames = o.floor_frames;
+    ro.threads = o.threads;
+    for (const TakeCamera& c : cameras) ro.gain[c.rig.camera.name] = c.gain;
+    capture = std::make_unique<RigCapture>(ro);
+    // The true rig is the capture's: bumped cameras stand where the bump put them.
+    rig = capture->rig();
+    for (TakeCamera& c : cameras) c.rig = rig.cameras[c.index];
+    const RigCapture* cap = capture.get();
+    board_frames.render = [cap](int i, int f) { return cap->render(i, f); };
+    board_frames.truth = [cap](int i, int f) { return cap->truth(i, f); };
+    board_frames.T_world_board = [cap](int i, int f) { return cap->T_world_board(i, f); };
+    board_frames.floor = [cap](int i, int f) { return cap->showsFloorBoard(i, f); };
+  } else if (o.preset == Preset::kIntrinsics) {
+    const TakeCamera& c = cameras.front();
+    detail::BoardViewOptions vo;
+    vo.samples_per_pixel = o.samples_per_pixel;
+    vo.gain = c.gain;
+    vo.blur_sigma_px = o.blur_sigma_px;
+    vo.noise_sigma = o.noise_sigma;
+    vo.threads = o.threads;
+    intrinsics_view = std::make_unique<detail::BoardView>(c.rig.camera, c.rig.T_world_cam,
+                                                          studio.sceneAt(0.0, kLayerStage), vo);
+    const detail::BoardView* view = intrinsics_view.get();
+    const std::uint64_t seed = o.seed;
+    auto boardPose = [view, board_spec, seed](int f) {
+      return view->T_world_cam() * intrinsicsBoardPose(view->camera(), board_spec, f, seed);
+    };
+    board_frames.render = [view, board_spec, boardPose, seed](int, int f) {
+      return view->render(board_spec, boardPose(f), false, seed, 0, f);
+    };
+    board_frames.truth = [view, board_spec, boardPose](int, int f) {
+      const Pose T_world_board = boardPose(f);
+      return visibleBoardPoints(view->camera(), view->T_world_cam(), board_spec, T_world_board,
+                                view->sceneWith(board_spec, T_world_board, false));
+    };
+    board_frames.T_world_board = [boardPose](int, int f) { return boardPose(f); };
+    board_frames.floor = [](int, int) { return false; };
+  }
+
   // Files known before rendering.
   fs::create_directories(out);
   writeRig(rig, out / "truth" / "rig.json");
@@ -268,30 +406,38 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   double render_ms = 0, plate_ms = 0;
   for (int f = 0; f < o.frames; ++f) {
     const double t = f / o.fps;
-    const std::vector<double> times = board_preset ? std::vector<double>{t} : shutterTimes(t, o);
+    if (board_preset) {
+      // Plates and board truth only: depth, masks and labels of a board on an empty stage say
+      // nothing a calibration needs (and made a 30-frame rig take 1 GB).
+      if (capture && capture->isFloorFrame(f)) floor_frames.push_back(f);
+      std::vector<nlohmann::json> lines;
+      std::vector<double> ms;
+      renderBoardFrame(board_frames, cameras, f, t, out, threads, lines, ms);
+      for (size_t i = 0; i < cameras.size(); ++i) {
+        board_lines[cameras[i].rig.camera.name].add(lines[i]);
+        plate_ms += ms[i];
+        render_ms += ms[i];
+      }
+      if (main_camera != nullptr) {
+        main_poses.add({{"frame", f}, {"time_s", t}, {"T_world_cam", poseToJson(main_camera->rig.T_world_cam)}});
+      }
+      if (progress) {
+        SynthProgress p;
+        p.frames_done = f + 1;
+        p.frames_total = o.frames;
+        p.elapsed_s = msSince(take_start) / 1000.0;
+        progress(p);
+      }
+      continue;
+    }
+    const std::vector<double> times = shutterTimes(t, o);
     const std::string png = frameFile(f, "png");
     const std::string exr = frameFile(f, "exr");
 
     // Scenes of this frame: plate (what the cameras film) at every shutter instant plus the
     // frame time itself (truth layers).
-    std::shared_ptr<const Primitive> board;
-    Pose T_world_board = Pose::Identity();
-    if (o.preset == Preset::kIntrinsics) {
-      const TakeCamera& c = cameras.front();
-      T_world_board =
-          c.rig.T_world_cam * intrinsicsBoardPose(c.rig.camera, board_spec, f, o.seed);
-    } else if (o.preset == Preset::kRig) {
-      T_world_board = rigBoardPose(board_spec, f, o.frames, o.seed);
-      if (isFloorBoardFrame(f, o.frames)) floor_frames.push_back(f);
-    }
-    if (board_preset) board = makeBoard(board_spec, T_world_board);
-    if (o.preset == Preset::kRig && isFloorBoardFrame(f, o.frames)) board = onTopOf(board);
-    const unsigned plate_layers = studio_preset ? kLayersPlate : unsigned{kLayerStage};
-    auto sceneAt = [&](double time_s, unsigned layers) {
-      Scene scene = studio.sceneAt(time_s, layers);
-      if (board) scene.add(board);
-      return scene;
-    };
+    const unsigned plate_layers = kLayersPlate;
+    auto sceneAt = [&](double time_s, unsigned layers) { return studio.sceneAt(time_s, layers); };
     const bool single_instant = times.size() == 1 && times[0] == t;
     const Scene centre_scene = sceneAt(t, plate_layers);
     std::vector<Scene> instant_scenes;
@@ -338,20 +484,6 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
                     {{"previz:camera", name}, {"previz:frame", std::to_string(f)}});
       writeImageAtomic(out / "truth" / "masks" / name / png, view.mask);
       writeImageAtomic(out / "truth" / "labels" / name / png, view.labels);
-
-      if (board_preset) {
-        nlohmann::json points = nlohmann::json::array();
-        for (const BoardObservation& b : visibleBoardPoints(c.rig.camera, centre.T_world_cam,
-                                                            board_spec, T_world_board,
-                                                            centre_scene)) {
-          points.push_back({{"id", b.id}, {"x", b.px.x()}, {"y", b.px.y()}});
-        }
-        board_lines[name].add({{"frame", f},
-                               {"time_s", t},
-                               {"floor", o.preset == Preset::kRig && isFloorBoardFrame(f, o.frames)},
-                               {"T_world_board", poseToJson(T_world_board)},
-                               {"points", points}});
-      }
     }
 
     if (main_camera != nullptr) {
@@ -456,6 +588,13 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
                      {"note",
                       "in floor frames the board lies face up with its board-frame origin at the "
                       "world origin: board x = world x, board y = -world y, board z = -world z"}});
+    // What the operator knows of the capture (multicam/observations.h readFloor): which frames
+    // show the floor board. A capture without floor frames (--no-floor) has no floor.json.
+    if (!floor_frames.empty()) {
+      writeJsonAtomic(out / "floor.json", {{"board", "board.json"},
+                                           {"frames", floor_frames},
+                                           {"T_world_board", poseToJson(floorBoardPose())}});
+    }
   }
 
   // take.json last: its presence marks a complete take.

@@ -4,7 +4,11 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <map>
+#include <optional>
 #include <string>
+
+#include "core/pose.h"
 
 namespace previz::synth {
 
@@ -35,8 +39,13 @@ struct SynthOptions {
   std::string camera = "main";   // intrinsics preset: which camera ("main" or "witness")
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
   int threads = 0;               // OpenMP threads (0 = default)
+  // Rig preset only (datasets/rig_capture.h RigCaptureOptions has the same meanings):
+  std::optional<std::uint64_t> board_seed;  // board trajectory; default: seed
+  bool floor_frames = true;                 // false: every frame waves the board (no floor.json)
+  std::map<std::string, int> delay_frames;  // camera -> frames late (its frame f shows f - delay)
+  std::map<std::string, Pose> bump;         // camera -> true pose T_world_cam * bump
 
-  void validate() const;  // throws Error naming the bad field
+  void validate() const;  // throws Error naming the bad field (and the camera for delay/bump)
 };
 
 struct SynthProgress {
@@ -48,8 +57,8 @@ struct SynthProgress {
 struct SynthSummary {
   int frames = 0;
   int cameras = 0;
-  double render_ms = 0;         // total time spent rendering
-  double ms_per_camera_frame = 0;
+  double render_ms = 0;         // total time spent rendering (summed over threads)
+  double ms_per_camera_frame = 0;  // plates; board presets include each camera's one-off stage
   std::filesystem::path out;
 };
 

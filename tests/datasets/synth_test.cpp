@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <nlohmann/json.hpp>
@@ -502,6 +503,28 @@ TEST(SynthLayout, IntrinsicsBoardCoversTheImageAndStaysInside) {
   for (int q = 0; q < 4; ++q) EXPECT_TRUE(corner_reached[q]) << "image corner " << q;
 }
 
+// A board take's scene: the empty stage and the board.
+Scene boardScene(const BoardSpec& spec, const Pose& T_world_board, bool floor, std::uint64_t seed) {
+  StudioConfig config;
+  config.seed = seed;
+  config.with_actor = false;
+  config.with_prop = false;
+  Scene scene = Studio(config).sceneAt(0.0, kLayerStage);
+  const auto board = makeBoard(spec, T_world_board);
+  scene.add(floor ? onTopOf(board) : board);
+  return scene;
+}
+
+// The object class the pixel-centre ray of (u, v) hits, as the truth labels said before board
+// takes stopped writing them.
+ObjectClass classAt(const Camera& camera, const Pose& T_world_cam, const Scene& scene, int u, int v) {
+  Eigen::Vector3d dir_cam;
+  if (!pixelRay(camera, Eigen::Vector2d(u, v), dir_cam)) return ObjectClass::kNone;
+  Hit hit;
+  scene.trace({T_world_cam.translation(), T_world_cam.linear() * dir_cam}, hit);
+  return hit.cls;
+}
+
 TEST(SynthRig, BoardTruthIsVisibleOnTheBoardAndFloorFramesSetTheWorld) {
   const fs::path dir = tmpDir("rig");
   SynthOptions o = smallOptions(Preset::kRig, 10);
@@ -516,6 +539,15 @@ TEST(SynthRig, BoardTruthIsVisibleOnTheBoardAndFloorFramesSetTheWorld) {
   EXPECT_LT(floor.translation().norm(), 1e-12);
   // Board z points down (into the floor), so the printed face looks up.
   EXPECT_NEAR(floor.linear().col(2).z(), -1.0, 1e-12);
+  // The operator's floor.json (multicam reads it): the same frames and pose, the take's board.
+  const nlohmann::json floor_json = readJsonFile(dir / "floor.json");
+  EXPECT_EQ(floor_json.at("board"), "board.json");
+  EXPECT_EQ(floor_json.at("frames"), nlohmann::json({7, 8, 9}));
+  EXPECT_TRUE(poseFromJson(floor_json.at("T_world_board")).isApprox(floor, 0));
+  // Calibration takes carry plates and board truth, no per-pixel truth layers.
+  for (const char* layer : {"truth/depth", "truth/masks", "truth/labels"}) {
+    EXPECT_FALSE(fs::exists(dir / layer)) << layer;
+  }
 
   const Rig rig = readRig(dir / "truth/rig.json");
   ASSERT_EQ(rig.cameras.size(), 4u);
@@ -531,10 +563,10 @@ TEST(SynthRig, BoardTruthIsVisibleOnTheBoardAndFloorFramesSetTheWorld) {
       const nlohmann::json& line = lines[f];
       EXPECT_EQ(line.at("frame"), f);
       EXPECT_EQ(line.at("floor").get<bool>(), f >= 7);
-      const cv::Mat labels = readImage(dir / "truth/labels" / name / frameName(f, "png"));
       const auto& points = line.at("points");
       frames_seen += points.size() >= n_points / 2;
       const Pose T_world_board = poseFromJson(line.at("T_world_board"));
+      const Scene scene = boardScene(spec, T_world_board, f >= 7, o.seed);
       for (const auto& p : points) {
         const int id = p.at("id");
         const Eigen::Vector2d px(p.at("x").get<double>(), p.at("y").get<double>());
@@ -545,10 +577,9 @@ TEST(SynthRig, BoardTruthIsVisibleOnTheBoardAndFloorFramesSetTheWorld) {
         ASSERT_TRUE(expected.has_value());
         EXPECT_LT((*expected - px).norm(), 1e-6);
         // ... and the pixel shows the board.
-        const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
-        on_board += labels.at<std::uint8_t>(std::clamp(v, 0, labels.rows - 1),
-                                            std::clamp(u, 0, labels.cols - 1)) ==
-                    static_cast<int>(ObjectClass::kBoard);
+        const int u = std::clamp(static_cast<int>(std::lround(px.x())), 0, rc.camera.width - 1);
+        const int v = std::clamp(static_cast<int>(std::lround(px.y())), 0, rc.camera.height - 1);
+        on_board += classAt(rc.camera, rc.T_world_cam, scene, u, v) == ObjectClass::kBoard;
         ++total;
       }
       if (f >= 7 && rc.role == "witness") {
@@ -560,6 +591,62 @@ TEST(SynthRig, BoardTruthIsVisibleOnTheBoardAndFloorFramesSetTheWorld) {
     EXPECT_GE(frames_seen, 3) << name;
     EXPECT_GE(on_board, 0.98 * total) << name;
   }
+}
+
+// A late camera, a knocked one and a capture without floor frames, as `previz synth --delay
+// --bump --no-floor` ask for them: the truth rig holds the knocked pose, the late camera's
+// board truth is that of earlier frames, and the rig board waves to the end.
+TEST(SynthRig, DelayBumpAndNoFloorReachTheTruth) {
+  const fs::path dir = tmpDir("rig_delay");
+  SynthOptions o = smallOptions(Preset::kRig, 6);
+  o.witness_width = 160;
+  o.witness_height = 90;
+  o.main_width = 240;
+  o.main_height = 135;
+  o.board = "aprilgrid";
+  o.delay_frames["witness02"] = 2;
+  Pose bump = Pose::Identity();
+  bump.linear() = Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  bump.translation() = Eigen::Vector3d(0.03, 0.0, 0.0);
+  o.bump["main"] = bump;
+  o.board_seed = 77;
+  o.floor_frames = false;
+  synthesizeTake(o, dir);
+
+  StudioRigOptions ro;
+  ro.witness_cameras = o.witness_cameras;
+  ro.seed = o.seed;
+  ro.witness_width = o.witness_width;
+  ro.witness_height = o.witness_height;
+  ro.main_width = o.main_width;
+  ro.main_height = o.main_height;
+  const Rig layout = studioRig(ro, 10.0, false);
+  const Rig truth = readRig(dir / "truth/rig.json");
+  EXPECT_TRUE(truth.at("main").T_world_cam.isApprox(layout.at("main").T_world_cam * bump, 1e-9));
+  EXPECT_TRUE(truth.at("witness01").T_world_cam.isApprox(layout.at("witness01").T_world_cam, 1e-9));
+  const std::vector<nlohmann::json> main_poses = readJsonLines(dir / "truth/main_poses.jsonl");
+  ASSERT_EQ(main_poses.size(), 6u);
+  EXPECT_TRUE(poseFromJson(main_poses[3].at("T_world_cam")).isApprox(truth.at("main").T_world_cam, 1e-9));
+
+  const BoardSpec spec = rigBoard(BoardType::kAprilGrid);
+  const std::vector<nlohmann::json> late = readJsonLines(dir / "truth/boards/witness02.jsonl");
+  const std::vector<nlohmann::json> on_time = readJsonLines(dir / "truth/boards/witness01.jsonl");
+  ASSERT_EQ(late.size(), 6u);
+  ASSERT_EQ(on_time.size(), 6u);
+  for (int f = 0; f < 6; ++f) {
+    // Every frame waves the board along the path of seed 77 (no floor frames).
+    const Pose expected_late = rigWavedBoardPose(spec, std::max(0, f - 2), 6, 77);
+    const Pose expected = rigWavedBoardPose(spec, f, 6, 77);
+    EXPECT_TRUE(poseFromJson(late[f].at("T_world_board")).isApprox(expected_late, 1e-9)) << f;
+    EXPECT_TRUE(poseFromJson(on_time[f].at("T_world_board")).isApprox(expected, 1e-9)) << f;
+    EXPECT_FALSE(late[f].at("floor").get<bool>());
+  }
+  EXPECT_FALSE(fs::exists(dir / "floor.json"));
+  EXPECT_EQ(readJsonFile(dir / "truth/board_frames.json").at("floor_frames"), nlohmann::json::array());
+  const nlohmann::json take = readJsonFile(dir / "take.json");
+  EXPECT_EQ(take.at("options").at("delay_frames").at("witness02"), 2);
+  EXPECT_EQ(take.at("options").at("board_seed"), 77);
+  EXPECT_TRUE(poseFromJson(take.at("options").at("bump").at("main")).isApprox(bump, 1e-12));
 }
 
 TEST(SynthOptionsTest, BadOptionsNameTheField) {
@@ -596,6 +683,27 @@ TEST(SynthOptionsTest, BadOptionsNameTheField) {
   o = SynthOptions{};
   o.shutter = 1.5;
   EXPECT_EQ(fieldOf(o), "shutter");
+  // Rig-only options, and camera names the take does not have.
+  o = SynthOptions{};
+  o.delay_frames["witness01"] = 1;
+  EXPECT_EQ(fieldOf(o), "delay_frames");  // studio preset
+  o.preset = Preset::kRig;
+  EXPECT_EQ(fieldOf(o), "(accepted)");
+  o.delay_frames["witness09"] = 1;  // 8 witnesses
+  EXPECT_EQ(fieldOf(o), "delay_frames");
+  try {
+    o.validate();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().camera, "witness09");
+  }
+  o = SynthOptions{};
+  o.preset = Preset::kRig;
+  o.bump["witness1"] = Pose::Identity();
+  EXPECT_EQ(fieldOf(o), "bump");
+  o = SynthOptions{};
+  o.preset = Preset::kIntrinsics;
+  o.floor_frames = false;
+  EXPECT_EQ(fieldOf(o), "floor_frames");
   try {
     presetFromString("documentary");
     ADD_FAILURE() << "unknown preset accepted";

@@ -1,0 +1,170 @@
+// previz carve: key (or take the mattes of) every witness, carve the actor's visual hull and
+// write per frame the main view's depth, the hull mesh and point cloud, and a report line.
+// Resumable and shardable; the job itself is carving/run.h, this only parses and prints.
+#include <iostream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "app/commands.h"
+#include "app/progress.h"
+#include "carving/run.h"
+#include "carving/take.h"
+#include "core/error.h"
+
+namespace previz::app {
+namespace {
+
+struct CarveArgs {
+  std::string take, rig, out, masks, main_poses;
+  std::string frames, shard = "0/1", volume, depth_camera, cameras;
+  double voxel_m = 0.005;
+  int k = 0;
+  int min_views = 2;
+  int threads = 0;
+  double point_spacing_m = 0;
+  bool depth_everywhere = false;
+  bool json = false;
+  bool quiet = false;
+};
+
+ErrorContext flag(const std::string& name) {
+  ErrorContext c;
+  c.field = name;
+  return c;
+}
+
+// "x0,y0,z0,x1,y1,z1" (metres, world) -> box; throws naming --volume.
+Eigen::AlignedBox3d parseVolume(const std::string& text) {
+  std::vector<double> v;
+  std::stringstream in(text);
+  for (std::string item; std::getline(in, item, ',');) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) v.clear();
+    } catch (const std::exception&) {
+      v.clear();
+      break;
+    }
+  }
+  if (v.size() != 6 || !(v[0] < v[3] && v[1] < v[4] && v[2] < v[5]))
+    throw Error("expected x0,y0,z0,x1,y1,z1 in metres with x0 < x1, y0 < y1, z0 < z1 (got '" +
+                    text + "')",
+                flag("--volume"));
+  return Eigen::AlignedBox3d(Eigen::Vector3d(v[0], v[1], v[2]), Eigen::Vector3d(v[3], v[4], v[5]));
+}
+
+std::vector<std::string> splitNames(const std::string& text) {
+  std::vector<std::string> names;
+  std::stringstream in(text);
+  for (std::string name; std::getline(in, name, ',');)
+    if (!name.empty()) names.push_back(name);
+  return names;
+}
+
+int runCarve(const CarveArgs& a) {
+  carving::RunOptions o;
+  o.out = a.out;
+  if (!a.frames.empty()) o.frames = carving::parseFrameRange(a.frames);
+  o.shard = carving::parseShard(a.shard);
+  o.hull.voxel_m = a.voxel_m;
+  o.hull.k = a.k;
+  o.hull.min_views = a.min_views;
+  o.hull.threads = a.threads;
+  if (!a.volume.empty()) o.hull.volume = parseVolume(a.volume);
+  o.depth_camera = a.depth_camera;
+  o.carve_cameras = splitNames(a.cameras);
+  o.depth_inside_silhouette = !a.depth_everywhere;
+  o.points.spacing_m = a.point_spacing_m;
+  o.validate();
+
+  const carving::Take take({a.take, a.rig, a.masks, a.main_poses});
+  carving::CarveJob job(take, o);
+  const std::vector<int> selected = job.selectedFrames();
+  int todo = 0;
+  for (int f : selected) todo += job.finished(f) ? 0 : 1;
+  if (!a.quiet) {
+    std::cerr << "carve: " << selected.size() << " frames selected (" << selected.size() - todo
+              << " already finished), " << job.carveCameras().size() << " carving cameras ("
+              << take.rigFormat() << (take.hasMasks() ? ", masks" : ", keyed") << "), depth for "
+              << (job.depthCamera().empty() ? std::string("no camera") : job.depthCamera()) << "\n";
+  }
+  ProgressLine progress("carve", todo, a.quiet);
+  const carving::RunSummary s = job.run([&](int done, int) { progress.update(done); });
+
+  nlohmann::json dropped = nlohmann::json::array();
+  for (const carving::FrameReport& r : s.carved) {
+    for (const carving::DroppedCamera& d : r.cameras_dropped) {
+      dropped.push_back({{"camera", d.camera}, {"frame", r.frame}, {"reason", d.reason}});
+      // Always printed (--quiet only silences the progress line): a person must see it.
+      std::cerr << "carve: frame " << r.frame << ": camera '" << d.camera << "' dropped: " << d.reason << "\n";
+    }
+  }
+  nlohmann::json failed = nlohmann::json::array();
+  for (const carving::FailedFrame& f : s.failed) {
+    failed.push_back({{"frame", f.frame}, {"reason", f.reason}});
+    std::cerr << "carve: frame " << f.frame << " failed: " << f.reason << "\n";
+  }
+  const double fps = s.ms > 0 ? 1000.0 * s.carved.size() / s.ms : 0.0;
+  std::cerr << "carve: " << s.carved.size() << " carved, " << s.skipped.size() << " skipped (finished), "
+            << s.failed.size() << " failed, " << fps << " fps -> " << a.out << "\n";
+  if (a.json) {
+    nlohmann::json j = {{"command", "carve"},
+                        {"out", a.out},
+                        {"frames_selected", s.selected},
+                        {"carved", s.carved.size()},
+                        {"skipped", s.skipped},
+                        {"failed", failed},
+                        {"dropped", dropped},
+                        {"depth_camera", job.depthCamera()},
+                        {"carve_cameras", job.carveCameras()},
+                        {"ms", s.ms},
+                        {"fps", fps}};
+    std::cout << j.dump() << "\n";
+  }
+  return s.failed.empty() ? 0 : 1;
+}
+
+}  // namespace
+
+Runner addCarveCommand(CLI::App& app) {
+  auto a = std::make_shared<CarveArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "carve", "Carve the actor's visual hull per frame: main-view depth, mesh, point cloud "
+               "(docs/formats.md, \"Carve output\")");
+  cmd->add_option("--take", a->take, "Take folder (cams/<cam>/%06d.png, optional clean/<cam>.png)")
+      ->required();
+  cmd->add_option("--rig", a->rig,
+                  "rig.json, or text rows of 3x4 projection matrices (name p11..p34) or K R t")
+      ->required();
+  cmd->add_option("--out", a->out, "Output folder")->required();
+  cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
+  cmd->add_option("--shard", a->shard, "Shard i/n: every n-th selected frame from the i-th")
+      ->capture_default_str();
+  cmd->add_option("--k", a->k, "A cell survives outside the silhouette of at most k cameras")
+      ->capture_default_str();
+  cmd->add_option("--voxel", a->voxel_m, "Finest cell edge, metres")->capture_default_str();
+  cmd->add_option("--volume", a->volume,
+                  "Carved volume x0,y0,z0,x1,y1,z1 (world, metres; default the 4 x 4 x 2.5 m stage)");
+  cmd->add_option("--min-views", a->min_views, "Cameras that must see a cell for it to survive")
+      ->capture_default_str();
+  cmd->add_option("--masks", a->masks,
+                  "Mattes DIR/<cam>/%06d.png (> 127 = inside) instead of keying");
+  cmd->add_option("--main-poses", a->main_poses,
+                  "JSON lines {frame, T_world_cam} of a moving main camera (e.g. truth/main_poses.jsonl)");
+  cmd->add_option("--depth-camera", a->depth_camera,
+                  "Camera to write depth for (default: the rig's main camera)");
+  cmd->add_option("--cameras", a->cameras, "Carving cameras a,b,c (default: every witness)");
+  cmd->add_flag("--depth-everywhere", a->depth_everywhere,
+                "Depth wherever a ray meets the hull, not only inside the depth camera's silhouette");
+  cmd->add_option("--point-spacing", a->point_spacing_m,
+                  "Point cloud: also sample faces this densely, metres (0 = mesh vertices)")
+      ->capture_default_str();
+  cmd->add_option("--threads", a->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+  cmd->add_flag("--json", a->json, "Print a JSON summary on stdout");
+  cmd->add_flag("--quiet", a->quiet, "No progress line");
+  return [a]() { return runCarve(*a); };
+}
+
+}  // namespace previz::app

@@ -1,0 +1,397 @@
+// Carving benchmark (issue 5, item 4): one studio frame, 8 witnesses 1280x720 + main 1920x1080
+// rendered by the synthetic studio (t = 4 s, 4 spp), then in this process: keying per camera,
+// carving at 1 cm and 5 mm, main-view depth, mesh extraction, and a dense-grid carve at the same
+// 1 cm cell size (cell centres projected through each camera's true lens into its silhouette,
+// early exit on the first camera that carves: the plain visual-hull loop, as cheap per cell as
+// it gets). Carving and depth use the renderer's true masks (pixel-centre ray hits the actor),
+// so that their figures do not move with the keyer's; the keyer is timed on the rendered plates
+// and its silhouettes' IoU against those masks is printed.
+// Besides Google Benchmark's table, one JSON line per stage:
+//   {"stage":..., "size":..., "ms":..., "budget_ms":..., "ratio_vs_dense":...}
+// "ms" is the median wall time of the runs, "ms_min" the fastest; "cpu_ms" the median CPU time of
+// the process (all threads): on a shared machine wall time also measures the other jobs.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "carving/hull.h"
+#include "carving/keyer.h"
+#include "datasets/render.h"
+#include "datasets/rigs.h"
+#include "datasets/studio.h"
+
+namespace {
+
+using namespace previz;
+using namespace previz::carving;
+using namespace previz::synth;
+
+constexpr double kTime = 4.0;  // mid-take: the actor walks on stage
+
+double nowMs() {
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+// CPU time of the whole process (every thread): on a shared machine wall time measures the
+// other jobs as much as this code; CPU time / threads is what an idle 2-core machine would take
+// if the stage scaled perfectly.
+double cpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+struct Stopwatch {
+  double wall = nowMs(), cpu = cpuMs();
+  double wallMs() const { return nowMs() - wall; }
+  double cpuMsSince() const { return cpuMs() - cpu; }
+};
+
+struct Frame {
+  std::vector<RigCamera> witnesses;
+  RigCamera main;
+  std::vector<cv::Mat> plates, truth_masks;  // witnesses
+  cv::Mat main_plate, main_truth;
+};
+
+const Frame& frame() {
+  static const Frame f = [] {
+    Frame fr;
+    const StudioConfig config;
+    const Studio studio(config);
+    const Rig rig = studioRig(StudioRigOptions{}, config.take_duration_s, true);
+    const Scene scene = studio.sceneAt(kTime, kLayersPlate);
+    RenderOptions ro;
+    ro.samples_per_pixel = 4;
+    for (const RigCamera& rc : rig.cameras) {
+      RigCamera c = rc;
+      if (c.role == "main") c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
+      const RenderedView view = renderView(c.camera, c.T_world_cam, scene, ro);
+      if (c.role == "main") {
+        fr.main = c;
+        fr.main_plate = view.bgr;
+        fr.main_truth = view.mask;
+      } else {
+        fr.witnesses.push_back(c);
+        fr.plates.push_back(view.bgr);
+        fr.truth_masks.push_back(view.mask);
+      }
+    }
+    return fr;
+  }();
+  return f;
+}
+
+struct Result {
+  std::string stage, size, extra;
+  std::vector<double> ms, cpu_ms;
+  double budget_ms = -1;  // < 0: none
+  int threads = 1;
+};
+std::map<std::string, Result>& results() {
+  static std::map<std::string, Result> r;
+  return r;
+}
+void record(const std::string& key, const std::string& stage, const std::string& size,
+            const Stopwatch& sw, double budget_ms, int threads, const std::string& extra = {}) {
+  const double ms = sw.wallMs(), cpu_ms = sw.cpuMsSince();
+  Result& r = results()[key];
+  r.threads = threads;
+  r.stage = stage;
+  r.size = size;
+  r.budget_ms = budget_ms;
+  r.extra = extra;
+  r.ms.push_back(ms);
+  r.cpu_ms.push_back(cpu_ms);
+}
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+// Keyers per camera (the screen model is estimated on the first frame and reused, as live).
+struct Keying {
+  std::vector<Keyer> witness;
+  Keyer main;
+  std::vector<cv::Mat> silhouettes;
+  cv::Mat main_silhouette;
+  explicit Keying(int threads) : main(mainOptions(threads)) {
+    KeyerOptions o;
+    o.soft_alpha = false;  // carving needs the silhouette only
+    o.threads = threads;
+    const Frame& f = frame();
+    for (size_t c = 0; c < f.plates.size(); ++c) witness.emplace_back(o);
+    silhouettes.resize(f.plates.size());
+    for (size_t c = 0; c < f.plates.size(); ++c)
+      silhouettes[c] = witness[c].key(f.plates[c], f.witnesses[c].camera.name).silhouette;
+    main_silhouette = main.key(f.main_plate, "main").silhouette;
+  }
+  static KeyerOptions mainOptions(int threads) {
+    KeyerOptions o;
+    o.remember_garbage_zone = false;  // the main camera moves on its dolly
+    o.threads = threads;
+    return o;
+  }
+};
+Keying& keying(int threads) {
+  static std::map<int, std::unique_ptr<Keying>> k;
+  if (!k[threads]) k[threads] = std::make_unique<Keying>(threads);
+  return *k[threads];
+}
+
+// Every stage runs with 1 thread and with the machine's threads (2 on the target). On a shared
+// machine the 1-thread CPU time is the figure that does not move with the other jobs.
+int benchThreads(const benchmark::State& state) {
+  return state.range(1) > 0 ? static_cast<int>(state.range(1))
+                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+std::string threadKey(int threads) { return "_t" + std::to_string(threads); }
+
+double iou(const cv::Mat& a, const cv::Mat& b) {
+  const double inter = cv::countNonZero(a & b), uni = cv::countNonZero(a | b);
+  return uni > 0 ? inter / uni : 1.0;
+}
+
+void BM_KeyWitness(benchmark::State& state) {
+  const Frame& f = frame();
+  const int threads = benchThreads(state);
+  Keying& k = keying(threads);
+  for (auto _ : state) {
+    for (size_t c = 0; c < f.plates.size(); ++c) {
+      const Stopwatch sw;
+      KeyResult r = k.witness[c].key(f.plates[c], f.witnesses[c].camera.name);
+      record("1_key_witness" + threadKey(threads), "key_witness", "1280x720", sw, 5.0 / 9, threads);
+      benchmark::DoNotOptimize(r.silhouette.data);
+    }
+  }
+}
+void BM_KeyMain(benchmark::State& state) {
+  const Frame& f = frame();
+  const int threads = benchThreads(state);
+  Keying& k = keying(threads);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    KeyResult r = k.main.key(f.main_plate, "main");
+    record("2_key_main" + threadKey(threads), "key_main", "1920x1080", sw, 5.0 / 9, threads);
+    benchmark::DoNotOptimize(r.silhouette.data);
+  }
+}
+
+struct CarveCase {
+  std::unique_ptr<Carver> carver;
+  VisualHull hull;
+};
+CarveCase& carveCase(double voxel, int threads) {
+  static std::map<std::pair<double, int>, CarveCase> cases;
+  CarveCase& c = cases[{voxel, threads}];
+  if (!c.carver) {
+    HullOptions o;
+    o.voxel_m = voxel;
+    o.threads = threads;
+    c.carver = std::make_unique<Carver>(frame().witnesses, o);
+    Silhouettes s;
+    s.masks = frame().truth_masks;
+    c.hull = c.carver->carve(s);
+    // First depth call builds the main lens' ray table (once per lens, not per frame).
+    c.carver->depth(c.hull, frame().main, frame().main_truth);
+  }
+  return c;
+}
+std::string voxelLabel(double voxel) { return std::to_string(static_cast<int>(voxel * 1000 + 0.5)) + "mm"; }
+
+void BM_Carve(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  CarveCase& c = carveCase(voxel, threads);
+  Silhouettes s;
+  s.masks = frame().truth_masks;
+  for (auto _ : state) {
+    const Stopwatch sw;
+    c.hull = c.carver->carve(s);
+    char extra[160];
+    std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"surface_cells\":%lld,\"inside_cells\":%lld",
+                  voxel, c.hull.stats.surface_cells, c.hull.stats.inside_cells);
+    record("3_carve_" + voxelLabel(voxel) + threadKey(threads), "carve",
+           "8x1280x720@" + voxelLabel(voxel), sw, 5.0, threads, extra);
+  }
+}
+void BM_Depth(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  CarveCase& c = carveCase(voxel, threads);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    cv::Mat d = c.carver->depth(c.hull, frame().main, frame().main_truth);
+    char extra[96];
+    std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"pixels\":%d", voxel,
+                  cv::countNonZero(frame().main_truth));
+    record("4_depth_" + voxelLabel(voxel) + threadKey(threads), "main_depth",
+           "1920x1080@" + voxelLabel(voxel), sw, 5.0, threads, extra);
+    benchmark::DoNotOptimize(d.data);
+  }
+}
+void BM_Mesh(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  CarveCase& c = carveCase(voxel, threads);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    TriangleMesh m = c.carver->mesh(c.hull);
+    char extra[96];
+    std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"vertices\":%zu,\"faces\":%zu", voxel,
+                  m.vertices.size(), m.faces.size());
+    record("5_mesh_" + voxelLabel(voxel) + threadKey(threads), "mesh", "hull@" + voxelLabel(voxel),
+           sw, -1, threads, extra);
+  }
+}
+
+// The dense reference: every cell centre of the grid, projected into every camera until one
+// carves it (k = 0, at least 2 views), occupancy written to a byte grid.
+struct DenseCamera {
+  double R[9], t[3], fx, fy, cx, cy, skew, k1, k2, p1, p2, k3;
+  int w, h;
+  const cv::Mat* mask;
+};
+long long denseCarve(const std::vector<DenseCamera>& cams, double voxel, int threads,
+                     std::vector<std::uint8_t>& occupancy) {
+  const HullOptions o;  // the same volume
+  const Eigen::Vector3d lo = o.volume.min(), size = o.volume.sizes();
+  const int nx = static_cast<int>(std::ceil(size.x() / voxel - 1e-9));
+  const int ny = static_cast<int>(std::ceil(size.y() / voxel - 1e-9));
+  const int nz = static_cast<int>(std::ceil(size.z() / voxel - 1e-9));
+  occupancy.resize(static_cast<size_t>(nx) * ny * nz);
+  std::vector<long long> kept(threads, 0);
+  std::vector<std::thread> pool;
+  for (int th = 0; th < threads; ++th)
+    pool.emplace_back([&, th] {
+      for (int z = th; z < nz; z += threads)
+        for (int y = 0; y < ny; ++y)
+          for (int x = 0; x < nx; ++x) {
+            const double p[3] = {lo.x() + (x + 0.5) * voxel, lo.y() + (y + 0.5) * voxel,
+                                 lo.z() + (z + 0.5) * voxel};
+            int views = 0;
+            bool in = true;
+            for (const DenseCamera& c : cams) {
+              const double qz = c.R[6] * p[0] + c.R[7] * p[1] + c.R[8] * p[2] + c.t[2];
+              if (qz <= 1e-3) continue;
+              const double xn = (c.R[0] * p[0] + c.R[1] * p[1] + c.R[2] * p[2] + c.t[0]) / qz;
+              const double yn = (c.R[3] * p[0] + c.R[4] * p[1] + c.R[5] * p[2] + c.t[1]) / qz;
+              const double r2 = xn * xn + yn * yn;
+              if (r2 > 2.0) continue;  // far outside every studio lens' view
+              const double radial = 1 + r2 * (c.k1 + r2 * (c.k2 + r2 * c.k3));
+              const double xd = xn * radial + 2 * c.p1 * xn * yn + c.p2 * (r2 + 2 * xn * xn);
+              const double yd = yn * radial + c.p1 * (r2 + 2 * yn * yn) + 2 * c.p2 * xn * yn;
+              const int u = static_cast<int>(c.fx * xd + c.skew * yd + c.cx + 0.5 + 1e6) - 1000000;
+              const int v = static_cast<int>(c.fy * yd + c.cy + 0.5 + 1e6) - 1000000;
+              if (u < 0 || v < 0 || u >= c.w || v >= c.h) continue;
+              ++views;
+              if (c.mask->ptr<std::uint8_t>(v)[u] <= 127) {
+                in = false;
+                break;
+              }
+            }
+            const bool keep = in && views >= 2;
+            occupancy[(static_cast<size_t>(z) * ny + y) * nx + x] = keep;
+            kept[th] += keep;
+          }
+    });
+  for (auto& t : pool) t.join();
+  long long total = 0;
+  for (long long k : kept) total += k;
+  return total;
+}
+
+void BM_DenseCarve(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  const Frame& f = frame();
+  std::vector<DenseCamera> cams;
+  for (size_t i = 0; i < f.witnesses.size(); ++i) {
+    const Camera& c = f.witnesses[i].camera;
+    const Pose T = f.witnesses[i].T_world_cam.inverse();
+    DenseCamera d;
+    for (int r = 0; r < 3; ++r) {
+      for (int col = 0; col < 3; ++col) d.R[r * 3 + col] = T.linear()(r, col);
+      d.t[r] = T.translation()[r];
+    }
+    d.fx = c.fx, d.fy = c.fy, d.cx = c.cx, d.cy = c.cy, d.skew = c.skew;
+    d.k1 = c.dist.k1, d.k2 = c.dist.k2, d.p1 = c.dist.p1, d.p2 = c.dist.p2, d.k3 = c.dist.k3;
+    d.w = c.width, d.h = c.height;
+    d.mask = &f.truth_masks[i];
+    cams.push_back(d);
+  }
+  std::vector<std::uint8_t> occupancy;
+  for (auto _ : state) {
+    const Stopwatch sw;
+    const long long kept = denseCarve(cams, voxel, threads, occupancy);
+    char extra[96];
+    std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"cells\":%zu,\"kept\":%lld", voxel,
+                  occupancy.size(), kept);
+    record("6_dense_" + voxelLabel(voxel) + threadKey(threads), "dense_carve",
+           "8x1280x720@" + voxelLabel(voxel), sw, -1, threads, extra);
+  }
+}
+
+// Args: {voxel mm (unused by keying), threads (0 = the machine's)}.
+BENCHMARK(BM_KeyWitness)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
+BENCHMARK(BM_KeyMain)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
+BENCHMARK(BM_Carve)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
+BENCHMARK(BM_Depth)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
+BENCHMARK(BM_Mesh)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_DenseCarve)->ArgsProduct({{10}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  auto& r = results();
+  const int machine_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  for (int threads : {1, machine_threads}) {
+    // Keying as the live loop pays it: 8 witnesses + main, one after another.
+    const std::string w = "1_key_witness" + threadKey(threads), m = "2_key_main" + threadKey(threads);
+    if (r.count(w) && r.count(m)) {
+      Result& k = r["1_key_frame" + threadKey(threads)];
+      k.stage = "key_frame";
+      k.size = "8x1280x720+1920x1080";
+      k.budget_ms = 5.0;
+      k.threads = threads;
+      k.ms.push_back(8 * median(r[w].ms) + median(r[m].ms));
+      k.cpu_ms.push_back(8 * median(r[w].cpu_ms) + median(r[m].cpu_ms));
+    }
+  }
+  double worst_iou = 1;
+  const Keying& keyed = keying(machine_threads);
+  for (size_t c = 0; c < keyed.silhouettes.size(); ++c)
+    worst_iou = std::min(worst_iou, iou(keyed.silhouettes[c], frame().truth_masks[c]));
+  for (const auto& [key, res] : r) {
+    const double ms = median(res.ms), cpu = median(res.cpu_ms);
+    const double ms_min = *std::min_element(res.ms.begin(), res.ms.end());
+    std::printf("{\"stage\":\"%s\",\"size\":\"%s\",\"threads\":%d,\"ms\":%.2f,\"ms_min\":%.2f,"
+                "\"cpu_ms\":%.2f,\"runs\":%zu,",
+                res.stage.c_str(), res.size.c_str(), res.threads, ms, ms_min, cpu, res.ms.size());
+    if (res.budget_ms > 0)
+      std::printf("\"budget_ms\":%.2f,", res.budget_ms);
+    else
+      std::printf("\"budget_ms\":null,");
+    const std::string dense = "6_dense_10mm" + threadKey(res.threads);
+    if (res.stage == "carve" && r.count(dense) && res.size.find("@10mm") != std::string::npos)
+      std::printf("\"ratio_vs_dense\":%.1f,\"cpu_ratio_vs_dense\":%.1f", median(r[dense].ms) / ms,
+                  median(r[dense].cpu_ms) / cpu);
+    else
+      std::printf("\"ratio_vs_dense\":null");
+    if (!res.extra.empty()) std::printf(",%s", res.extra.c_str());
+    std::printf("}\n");
+  }
+  std::printf("{\"stage\":\"key_check\",\"worst_witness_iou_vs_truth\":%.4f}\n", worst_iou);
+  return 0;
+}

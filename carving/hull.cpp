@@ -1,0 +1,1466 @@
+// Visual hull: coarse-to-fine carving of a sparse cell hierarchy, per-pixel hull depth for any
+// camera, and the hull surface as a mesh. See carving/hull.h for the contract and
+// carving/detail/hull_camera.h for the projection and the footprint test.
+//
+// Carving. Level l cells have edge voxel * 2^l. Top cells (~32 cm) start with every used camera
+// undecided. A parent that is undecided ("mixed") is split into its 8 children, and each child
+// is tested only in the cameras that were still mixed for its parent: a camera that saw the
+// parent wholly inside (or wholly outside, or not at all) says the same of every child. Small
+// parents are projected once per camera with their Jacobian (affine footprints plus a bound on
+// the second-order term); large ones project the 27 lattice corners of their 8 children, each
+// footprint padded by the bound on the distortion's curvature. Children outside in more
+// than k cameras, or seen by fewer than min_views, are dropped; children inside in every camera
+// that sees them are kept whole; the rest go one level down, and at level 0 become surface
+// voxels that keep their undecided cameras for the exact point test. The work follows the
+// surface: the cells tested at each level are those next to the silhouette cones' boundary.
+#include "carving/hull.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+
+#include <opencv2/imgproc.hpp>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
+#include "carving/detail/hull_camera.h"
+#include "carving/detail/hull_data.h"
+#include "core/error.h"
+
+namespace previz::carving {
+
+using detail::CameraModel;
+using detail::CamState;
+using detail::FrameCam;
+using detail::HullData;
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int kTopCellsPerAxis = 16;  // the top level has at most this many cells per axis
+// Along a ray inside a surface voxel: samples every voxel / kSamplesPerVoxel, then bisection
+// between the last outside and the first inside sample (the surface to 1/32 of the sampling
+// step: 0.08 mm at 5 mm cells). Mesh edges use the same bisection.
+constexpr int kSamplesPerVoxel = 2;
+constexpr int kRefineIterations = 5;
+
+std::string num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
+}  // namespace
+
+void HullOptions::validate() const {
+  auto bad = [](const std::string& field, const std::string& message) {
+    throw Error("carve: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+  };
+  if (!(voxel_m > 0.0) || !std::isfinite(voxel_m))
+    bad("voxel_m", "must be a finite value > 0 (got " + num(voxel_m) + ")");
+  const Eigen::Vector3d size = volume.sizes();
+  if (volume.isEmpty() || !(size.minCoeff() > 0.0) || !size.allFinite())
+    bad("volume", "must be a non-empty finite box");
+  if (size.maxCoeff() / voxel_m > 65000)
+    bad("voxel_m", "gives more than 65000 cells along an axis of the volume (got " +
+                       num(voxel_m) + ")");
+  if (k < 0) bad("k", "must be >= 0 (got " + std::to_string(k) + ")");
+  if (min_views < 1) bad("min_views", "must be >= 1 (got " + std::to_string(min_views) + ")");
+  if (threads < 0) bad("threads", "must be >= 0 (got " + std::to_string(threads) + ")");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cameras and silhouettes
+// ---------------------------------------------------------------------------------------------
+namespace detail {
+namespace {
+
+// Bounds over the disc |x| <= radius (ideal normalized) of the distortion's first and second
+// derivatives (operator norms, via Frobenius norms), sampled on a polar grid by central
+// differences. The distortion is a smooth low-degree polynomial, so its derivatives vary slowly;
+// the 1.25 covers the sampling.
+struct LensBounds {
+  double jacobian = 1;  // sup |D distort|
+  double second = 0;    // sup |D^2 distort [h, h]| / |h|^2
+};
+LensBounds lensBounds(const Camera& camera, double radius) {
+  const double h = 1e-3 * std::max(radius, 0.1);
+  auto f = [&](double x, double y) { return camera.distort(Eigen::Vector2d(x, y)); };
+  LensBounds b{0, 0};
+  for (int ir = 0; ir <= 48; ++ir) {
+    const double r = radius * ir / 48.0;
+    for (int ia = 0; ia < 96; ++ia) {
+      const double a = 2.0 * M_PI * ia / 96.0;
+      const double x = r * std::cos(a), y = r * std::sin(a);
+      b.jacobian = std::max(b.jacobian, camera.distortJacobian(Eigen::Vector2d(x, y)).norm());
+      const Eigen::Vector2d fxx = (f(x + h, y) - 2.0 * f(x, y) + f(x - h, y)) / (h * h);
+      const Eigen::Vector2d fyy = (f(x, y + h) - 2.0 * f(x, y) + f(x, y - h)) / (h * h);
+      const Eigen::Vector2d fxy =
+          (f(x + h, y + h) - f(x + h, y - h) - f(x - h, y + h) + f(x - h, y - h)) / (4 * h * h);
+      const double n2 = fxx.squaredNorm() + fyy.squaredNorm() + 2.0 * fxy.squaredNorm();
+      b.second = std::max(b.second, std::sqrt(n2));
+    }
+  }
+  b.jacobian *= 1.25;
+  b.second *= 1.25;
+  return b;
+}
+
+// Largest ideal normalized radius that the image border undistorts to (+inf when some border
+// pixel has no preimage in the lens' invertible domain).
+double borderRadius(const Camera& camera) {
+  const InverseDistortion inverse(camera.dist);
+  double worst = 0;
+  auto visit = [&](double u, double v) {
+    const Eigen::Vector2d xd = camera.pixelToNormalized(Eigen::Vector2d(u, v));
+    Eigen::Vector2d x = xd;
+    if (!camera.dist.isZero()) {
+      const InverseResult r = inverse.solve(xd);
+      if (!r.ok()) {
+        worst = kInf;
+        return;
+      }
+      x = r.point;
+    }
+    worst = std::max(worst, x.norm());
+  };
+  const double u_max = camera.width - 0.5, v_max = camera.height - 0.5;
+  for (double u = -0.5; u < u_max + 2.0; u += 2.0) {
+    visit(std::min(u, u_max), -0.5);
+    visit(std::min(u, u_max), v_max);
+  }
+  for (double v = -0.5; v < v_max + 2.0; v += 2.0) {
+    visit(-0.5, std::min(v, v_max));
+    visit(u_max, std::min(v, v_max));
+  }
+  return worst;
+}
+
+}  // namespace
+
+CameraModel makeCameraModel(const RigCamera& rig_camera) {
+  const Camera& c = rig_camera.camera;
+  c.validate();
+  CameraModel m;
+  m.name = c.name;
+  m.width = c.width;
+  m.height = c.height;
+  const Pose T_cam_world = rig_camera.T_world_cam.inverse();
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) m.R[r * 3 + col] = T_cam_world.linear()(r, col);
+    m.t[r] = T_cam_world.translation()[r];
+  }
+  m.centre_world = rig_camera.T_world_cam.translation();
+  m.fx = c.fx;
+  m.fy = c.fy;
+  m.cx = c.cx;
+  m.cy = c.cy;
+  m.skew = c.skew;
+  m.k1 = c.dist.k1;
+  m.k2 = c.dist.k2;
+  m.p1 = c.dist.p1;
+  m.p2 = c.dist.p2;
+  m.k3 = c.dist.k3;
+  m.distorted = !c.dist.isZero();
+  // 2 % beyond the border: the valid disc must contain every point that lands in the image.
+  const double fold = 0.98 * c.maxInvertibleRadius();  // +inf when the lens never folds
+  const double border = borderRadius(c);
+  double r_valid = std::min(1.02 * border + 1e-9, fold);
+  if (!std::isfinite(r_valid)) {
+    throw Error("carve: the image border has no ray through this lens (distortion folds "
+                "before the image edge)",
+                ErrorContext{"", c.name, std::nullopt, "distortion"});
+  }
+  m.r_valid = r_valid;
+  m.r2_valid = r_valid * r_valid;
+  const double lk = std::max(std::hypot(c.fx, c.skew), c.fy);  // |K| on normalized coordinates
+  const LensBounds lens = m.distorted ? lensBounds(c, r_valid) : LensBounds{1.0, 0.0};
+  m.pad_per_diam2 = 0.5 * lens.second * lk;
+  // Perspective pi(q) = (qx, qy) / qz: |D pi h| <= |h| (1 + r) / z and
+  // |D^2 pi [h, h]| <= 2 |h|^2 (1 + r) / z^2 with r the ideal radius; the chain rule through
+  // the distortion and K and Taylor's remainder (factor 1/2) give the bound.
+  const double s = 1.0 + r_valid;
+  m.pad_per_h2 = 0.5 * lk * (2.0 * lens.jacobian * s + lens.second * s * s);
+  return m;
+}
+
+FrameCam makeFrameCam(const cv::Mat& mask) {
+  FrameCam f;
+  f.used = true;
+  f.width = mask.cols;
+  f.height = mask.rows;
+  // > 127 is a byte's high bit. One pass ORs every row into a column accumulator and into a
+  // per-row flag (16 pixels per SSE2 instruction); the bbox falls out of both.
+  std::vector<std::uint8_t> columns(mask.cols, 0);
+  int y0 = mask.rows, y1 = -1;
+  for (int v = 0; v < mask.rows; ++v) {
+    const std::uint8_t* row = mask.ptr<std::uint8_t>(v);
+    std::uint8_t* col = columns.data();
+    int u = 0;
+    std::uint8_t acc = 0;
+#ifdef __SSE2__
+    __m128i acc16 = _mm_setzero_si128();
+    for (; u + 16 <= mask.cols; u += 16) {
+      const __m128i x = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + u));
+      acc16 = _mm_or_si128(acc16, x);
+      __m128i* c = reinterpret_cast<__m128i*>(col + u);
+      _mm_storeu_si128(c, _mm_or_si128(_mm_loadu_si128(c), x));
+    }
+    acc = _mm_movemask_epi8(acc16) ? 0x80 : 0;
+#endif
+    for (; u < mask.cols; ++u) {
+      acc |= row[u];
+      col[u] |= row[u];
+    }
+    if (acc & 0x80) {
+      y0 = std::min(y0, v);
+      y1 = v;
+    }
+  }
+  if (y1 < 0) return f;  // nothing inside: every seen point is outside
+  int x0 = 0, x1 = mask.cols - 1;
+  while (!(columns[x0] & 0x80)) ++x0;
+  while (!(columns[x1] & 0x80)) --x1;
+  f.x0 = x0;
+  f.x1 = x1;
+  f.y0 = y0;
+  f.y1 = y1;
+  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  // Bit-packed rows. Pixels right of x1 are outside (high bit clear), so whole 16-pixel chunks
+  // may run past the bbox as long as they stay in the image row.
+  f.stride = (w + 7) / 8 + 8;
+  f.bits.assign(static_cast<size_t>(f.stride) * h, 0);
+  for (int r = 0; r < h; ++r) {
+    const std::uint8_t* row = mask.ptr<std::uint8_t>(y0 + r) + x0;
+    std::uint8_t* out = f.bits.data() + static_cast<size_t>(r) * f.stride;
+    int c = 0;
+#ifdef __SSE2__
+    for (; c < w && x0 + c + 16 <= mask.cols; c += 16) {
+      const int m = _mm_movemask_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(row + c)));
+      out[c >> 3] = static_cast<std::uint8_t>(m);
+      out[(c >> 3) + 1] = static_cast<std::uint8_t>(m >> 8);
+    }
+#endif
+    for (; c < w; ++c)
+      if (row[c] & 0x80) out[c >> 3] |= static_cast<std::uint8_t>(1u << (c & 7));
+  }
+  cv::Mat bin;
+  cv::threshold(mask(cv::Rect(x0, y0, w, h)), bin, 127, 1, cv::THRESH_BINARY);
+  cv::integral(bin, f.integral, CV_32S);
+  return f;
+}
+
+}  // namespace detail
+
+// ---------------------------------------------------------------------------------------------
+// Carving
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+// The finest grid over the volume and the number of levels above it.
+struct Grid {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  double voxel = 0;
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();
+  int top_level = 0;
+};
+
+Grid makeGrid(const HullOptions& options) {
+  Grid g;
+  g.origin = options.volume.min();
+  g.voxel = options.voxel_m;
+  const Eigen::Vector3d size = options.volume.sizes();
+  for (int a = 0; a < 3; ++a)
+    g.dims[a] = std::max(1, static_cast<int>(std::ceil(size[a] / g.voxel - 1e-9)));
+  const int largest = g.dims.maxCoeff();
+  while (((largest + (1 << g.top_level) - 1) >> g.top_level) > kTopCellsPerAxis) ++g.top_level;
+  return g;
+}
+
+// A cell during carving: index at its level, the cameras known to see it wholly outside /
+// inside, and the cameras still undecided.
+struct Cell {
+  std::uint16_t x = 0, y = 0, z = 0;
+  std::uint8_t level = 0;
+  std::uint8_t n_out = 0, n_in = 0;
+  std::uint32_t mixed = 0;
+};
+
+// Lattice of a parent's 8 children: 3 x 3 x 3 points, index (iz * 3 + iy) * 3 + ix.
+struct ChildLattice {
+  std::array<std::array<std::uint8_t, 8>, 8> corner;  // child -> its 8 lattice points
+  std::array<std::uint32_t, 8> corner_mask;           // child -> bit set of those points
+  ChildLattice() {
+    for (int c = 0; c < 8; ++c) {
+      corner_mask[c] = 0;
+      for (int q = 0; q < 8; ++q) {
+        const int ix = (c & 1) + (q & 1), iy = ((c >> 1) & 1) + ((q >> 1) & 1),
+                  iz = (c >> 2) + (q >> 2);
+        corner[c][q] = static_cast<std::uint8_t>((iz * 3 + iy) * 3 + ix);
+        corner_mask[c] |= 1u << corner[c][q];
+      }
+    }
+  }
+};
+const ChildLattice& childLattice() {
+  static const ChildLattice lattice;
+  return lattice;
+}
+
+struct LatticePoint {
+  double x, y, u, v;
+  bool valid, behind;
+};
+
+struct CarveContext {
+  const std::vector<CameraModel>* cameras;
+  const std::vector<FrameCam>* frames;
+  Grid grid;
+  int k = 0, min_views = 2;
+};
+
+struct BlockOut {
+  std::vector<Cell> mixed, inside;
+  long long tested = 0;
+  void clear() {
+    mixed.clear();
+    inside.clear();
+    tested = 0;
+  }
+};
+
+// Footprint state of one child in one camera from its projected corners.
+CamState childState(const CameraModel& cam, const FrameCam& frame, const LatticePoint* pts,
+                    const std::array<std::uint8_t, 8>& corners) {
+  double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf;
+  double xmin = kInf, xmax = -kInf, ymin = kInf, ymax = -kInf;
+  bool any_invalid = false, all_behind = true;
+  for (int q = 0; q < 8; ++q) {
+    const LatticePoint& p = pts[corners[q]];
+    if (!p.behind) all_behind = false;
+    if (!p.valid) {
+      any_invalid = true;
+      continue;
+    }
+    umin = std::min(umin, p.u);
+    umax = std::max(umax, p.u);
+    vmin = std::min(vmin, p.v);
+    vmax = std::max(vmax, p.v);
+    xmin = std::min(xmin, p.x);
+    xmax = std::max(xmax, p.x);
+    ymin = std::min(ymin, p.y);
+    ymax = std::max(ymax, p.y);
+  }
+  // Behind the camera as a whole (the cell is convex): unseen. Partly behind or past the
+  // valid disc: undecided, left to the children and finally to the point test.
+  if (any_invalid) return all_behind ? detail::kUnseen : detail::kMixed;
+  const double dx = xmax - xmin, dy = ymax - ymin;
+  const double pad = cam.pad_per_diam2 * (dx * dx + dy * dy) + detail::kPadEpsPx;
+  return detail::rectState(frame, umin - pad, umax + pad, vmin - pad, vmax + pad);
+}
+
+// Largest second-order pad (px) for which the affine footprint is used; coarser cells project
+// their 27 lattice corners instead.
+constexpr double kAffineMaxPadPx = 0.5;
+
+// Children states in one camera from the parent's affine image: at the parent's centre c the
+// projection is pixel(c) + J h + O(|h|^2), and the second-order term is bounded by
+// CameraModel::pad_per_h2. A child's footprint then lies in the box of its centre's affine image
+// grown by the child's half extents |J| he plus that pad: one projection per parent and camera
+// instead of up to 27. False when the parent is too large or too near the valid disc's edge.
+bool affineStates(const CameraModel& cam, const FrameCam& frame, const double* centre, double he,
+                  const bool* alive, CamState* states) {
+  double q[3];
+  cam.toCamera(centre, q);
+  const double hd = 2.0 * std::sqrt(3.0) * he;  // parent half-diagonal
+  const double z_min = q[2] - hd;
+  if (!(z_min > detail::kZNear)) return false;
+  const double iz = 1.0 / q[2];
+  const double x = q[0] * iz, y = q[1] * iz;
+  const double r = std::sqrt(x * x + y * y);
+  if (r + hd * (1.0 + r) / z_min > cam.r_valid) return false;
+  const double pad = cam.pad_per_h2 * hd * hd / (z_min * z_min) + detail::kPadEpsPx;
+  if (pad > kAffineMaxPadPx) return false;
+  double Jn[4];
+  cam.pixelJacobian(x, y, Jn);
+  // d pixel / d world = Jn * D pi * R with D pi = [1 0 -x; 0 1 -y] / z.
+  const double A[6] = {Jn[0] * iz, Jn[1] * iz, -(Jn[0] * x + Jn[1] * y) * iz,
+                       Jn[2] * iz, Jn[3] * iz, -(Jn[2] * x + Jn[3] * y) * iz};
+  double J[6];
+  for (int row = 0; row < 2; ++row)
+    for (int col = 0; col < 3; ++col)
+      J[row * 3 + col] = A[row * 3] * cam.R[col] + A[row * 3 + 1] * cam.R[3 + col] +
+                         A[row * 3 + 2] * cam.R[6 + col];
+  double u, v;
+  cam.toPixel(x, y, u, v);
+  const double wu = he * (std::abs(J[0]) + std::abs(J[1]) + std::abs(J[2])) + pad;
+  const double wv = he * (std::abs(J[3]) + std::abs(J[4]) + std::abs(J[5])) + pad;
+  const double ju[3] = {he * J[0], he * J[1], he * J[2]};
+  const double jv[3] = {he * J[3], he * J[4], he * J[5]};
+  for (int c = 0; c < 8; ++c) {
+    if (!alive[c]) continue;
+    const double sx = (c & 1) ? 1.0 : -1.0, sy = (c & 2) ? 1.0 : -1.0, sz = (c & 4) ? 1.0 : -1.0;
+    const double uc = u + sx * ju[0] + sy * ju[1] + sz * ju[2];
+    const double vc = v + sx * jv[0] + sy * jv[1] + sz * jv[2];
+    states[c] = detail::rectState(frame, uc - wu, uc + wu, vc - wv, vc + wv);
+  }
+  return true;
+}
+
+// Children states in one camera from their projected corners (the 3x3x3 lattice, each point
+// projected once) and the distortion pad of each child's footprint.
+void latticeStates(const CameraModel& cam, const FrameCam& frame, const double* corner0,
+                   double edge, const bool* alive, CamState* states) {
+  const ChildLattice& lattice = childLattice();
+  std::uint32_t needed = 0;
+  for (int c = 0; c < 8; ++c)
+    if (alive[c]) needed |= lattice.corner_mask[c];
+  // Corner (ix, iy, iz) in camera coordinates: q0 + ix a + iy b + iz c.
+  double q0[3];
+  cam.toCamera(corner0, q0);
+  const double ax[3] = {cam.R[0] * edge, cam.R[3] * edge, cam.R[6] * edge};
+  const double ay[3] = {cam.R[1] * edge, cam.R[4] * edge, cam.R[7] * edge};
+  const double az[3] = {cam.R[2] * edge, cam.R[5] * edge, cam.R[8] * edge};
+  LatticePoint pts[27];
+  while (needed) {
+    const int li = __builtin_ctz(needed);
+    needed &= needed - 1;
+    const int ix = li % 3, iy = (li / 3) % 3, iz = li / 9;
+    double q[3];
+    for (int a = 0; a < 3; ++a) q[a] = q0[a] + ix * ax[a] + iy * ay[a] + iz * az[a];
+    LatticePoint& p = pts[li];
+    p.behind = !(q[2] > detail::kZNear);
+    p.valid = false;
+    if (p.behind) continue;
+    const double iqz = 1.0 / q[2];
+    p.x = q[0] * iqz;
+    p.y = q[1] * iqz;
+    if (p.x * p.x + p.y * p.y > cam.r2_valid) continue;
+    p.valid = true;
+    cam.toPixel(p.x, p.y, p.u, p.v);
+  }
+  for (int c = 0; c < 8; ++c)
+    if (alive[c]) states[c] = childState(cam, frame, pts, lattice.corner[c]);
+}
+
+// Splits one mixed parent into its children at 'level' and sorts them into dropped / inside /
+// mixed (see the file comment).
+void splitParent(const Cell& parent, int level, const CarveContext& ctx, BlockOut& out) {
+  const Grid& g = ctx.grid;
+  const int span = 1 << level;  // child edge in finest voxels
+  Cell child[8];
+  bool alive[8];
+  bool boundary[8];
+  int n_alive = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int idx[3] = {2 * parent.x + (c & 1), 2 * parent.y + ((c >> 1) & 1),
+                        2 * parent.z + (c >> 2)};
+    alive[c] = true;
+    boundary[c] = false;
+    for (int a = 0; a < 3; ++a) {
+      if (static_cast<long long>(idx[a]) * span >= g.dims[a]) alive[c] = false;
+      // Cells on the volume's boundary are never kept whole: the mesh closes the hull there.
+      if (idx[a] == 0 || static_cast<long long>(idx[a] + 1) * span >= g.dims[a])
+        boundary[c] = true;
+    }
+    child[c].x = static_cast<std::uint16_t>(idx[0]);
+    child[c].y = static_cast<std::uint16_t>(idx[1]);
+    child[c].z = static_cast<std::uint16_t>(idx[2]);
+    child[c].level = static_cast<std::uint8_t>(level);
+    child[c].n_out = parent.n_out;
+    child[c].n_in = parent.n_in;
+    child[c].mixed = 0;
+    n_alive += alive[c];
+  }
+  out.tested += n_alive;
+
+  const double edge = g.voxel * span;
+  const double corner0[3] = {g.origin.x() + edge * 2 * parent.x,
+                             g.origin.y() + edge * 2 * parent.y,
+                             g.origin.z() + edge * 2 * parent.z};
+  const double centre[3] = {corner0[0] + edge, corner0[1] + edge, corner0[2] + edge};
+  CamState states[8];
+  std::uint32_t remaining = parent.mixed;
+  while (remaining && n_alive > 0) {
+    const int cam_index = __builtin_ctz(remaining);
+    remaining &= remaining - 1;
+    const CameraModel& cam = (*ctx.cameras)[cam_index];
+    const FrameCam& frame = (*ctx.frames)[cam_index];
+    if (!affineStates(cam, frame, centre, 0.5 * edge, alive, states))
+      latticeStates(cam, frame, corner0, edge, alive, states);
+    const std::uint32_t bit = 1u << cam_index;
+    for (int c = 0; c < 8; ++c) {
+      if (!alive[c]) continue;
+      switch (states[c]) {
+        case detail::kOut:
+          if (++child[c].n_out > ctx.k) {
+            alive[c] = false;
+            --n_alive;
+          }
+          break;
+        case detail::kIn:
+          ++child[c].n_in;
+          break;
+        case detail::kMixed:
+          child[c].mixed |= bit;
+          break;
+        case detail::kUnseen:
+          break;
+      }
+    }
+  }
+  for (int c = 0; c < 8; ++c) {
+    if (!alive[c]) continue;
+    const Cell& ch = child[c];
+    const int n_mixed = __builtin_popcount(ch.mixed);
+    if (ch.n_in + ch.n_out + n_mixed < ctx.min_views) continue;  // seen by too few
+    if (ch.n_out + n_mixed <= ctx.k && ch.n_in + ch.n_out >= ctx.min_views && !boundary[c])
+      out.inside.push_back(ch);
+    else
+      out.mixed.push_back(ch);
+  }
+}
+
+HullCell toHullCell(const Cell& c) {
+  HullCell h;
+  h.index = Eigen::Vector3i(c.x, c.y, c.z);
+  h.level = c.level;
+  return h;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Carver state
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+// What depth() needs of one lens, built on its first use: per-pixel rays (ideal normalized
+// (x, y), NaN where not invertible) and the projection model (its pose set per call).
+struct RayTable {
+  Camera camera;
+  std::vector<float> xy;
+  CameraModel model;
+};
+
+bool sameLens(const Camera& a, const Camera& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
+         a.cx == b.cx && a.cy == b.cy && a.skew == b.skew && a.dist.k1 == b.dist.k1 &&
+         a.dist.k2 == b.dist.k2 && a.dist.p1 == b.dist.p1 && a.dist.p2 == b.dist.p2 &&
+         a.dist.k3 == b.dist.k3;
+}
+
+}  // namespace
+
+struct Carver::Impl {
+  std::vector<RigCamera> cameras;
+  std::shared_ptr<const std::vector<CameraModel>> models;
+  HullOptions options;
+  Grid grid;
+  std::shared_ptr<const HullData> last;
+  std::vector<BlockOut> blocks;  // reused between frames: carving allocates nothing when warm
+
+  mutable std::mutex rays_mutex;
+  mutable std::vector<std::shared_ptr<const RayTable>> rays;
+  std::shared_ptr<const RayTable> rayTable(const Camera& camera, int threads) const;
+};
+
+std::shared_ptr<const RayTable> Carver::Impl::rayTable(const Camera& camera, int threads) const {
+  std::lock_guard<std::mutex> lock(rays_mutex);
+  for (const auto& table : rays)
+    if (sameLens(table->camera, camera)) return table;
+  auto table = std::make_shared<RayTable>();
+  table->camera = camera;
+  table->xy.assign(2 * static_cast<size_t>(camera.width) * camera.height,
+                   std::numeric_limits<float>::quiet_NaN());
+  const InverseDistortion inverse(camera.dist);
+  const bool distorted = !camera.dist.isZero();
+#pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      const Eigen::Vector2d xd = camera.pixelToNormalized(Eigen::Vector2d(u, v));
+      Eigen::Vector2d x = xd;
+      if (distorted) {
+        const InverseResult r = inverse.solve(xd);
+        if (!r.ok()) continue;
+        x = r.point;
+      }
+      const size_t i = 2 * (static_cast<size_t>(v) * camera.width + u);
+      table->xy[i] = static_cast<float>(x.x());
+      table->xy[i + 1] = static_cast<float>(x.y());
+    }
+  }
+  RigCamera at_origin;
+  at_origin.camera = camera;
+  table->model = detail::makeCameraModel(at_origin);
+  rays.push_back(table);
+  return table;
+}
+
+Carver::Carver(std::vector<RigCamera> cameras, const HullOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  options.validate();
+  if (cameras.empty())
+    throw Error("carve: no cameras to carve with", ErrorContext{"", "", std::nullopt, "cameras"});
+  if (static_cast<int>(cameras.size()) > detail::kMaxCameras)
+    throw Error("carve: at most " + std::to_string(detail::kMaxCameras) + " cameras (got " +
+                    std::to_string(cameras.size()) + ")",
+                ErrorContext{"", "", std::nullopt, "cameras"});
+  auto models = std::make_shared<std::vector<CameraModel>>();
+  for (const RigCamera& c : cameras) models->push_back(detail::makeCameraModel(c));
+  impl_->cameras = std::move(cameras);
+  impl_->models = std::move(models);
+  impl_->options = options;
+  impl_->grid = makeGrid(options);
+}
+
+Carver::~Carver() = default;
+
+const std::vector<RigCamera>& Carver::cameras() const { return impl_->cameras; }
+const HullOptions& Carver::options() const { return impl_->options; }
+
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Carving levels and the brick lookup
+// ---------------------------------------------------------------------------------------------
+constexpr int kBlock = 64;  // parents per work item: results are gathered in block order
+
+void carveLevels(const CarveContext& ctx, std::uint32_t used_mask, int threads,
+                 std::vector<BlockOut>& blocks, std::vector<Cell>& inside,
+                 std::vector<Cell>& surface, std::vector<long long>& tested) {
+  const Grid& g = ctx.grid;
+  // The top cells are the children of virtual parents one level up, undecided everywhere.
+  const int pl = g.top_level + 1;
+  Eigen::Vector3i pd;
+  for (int a = 0; a < 3; ++a) pd[a] = (g.dims[a] + (1 << pl) - 1) >> pl;
+  std::vector<Cell> parents, next;
+  for (int z = 0; z < pd.z(); ++z)
+    for (int y = 0; y < pd.y(); ++y)
+      for (int x = 0; x < pd.x(); ++x) {
+        Cell c;
+        c.x = static_cast<std::uint16_t>(x);
+        c.y = static_cast<std::uint16_t>(y);
+        c.z = static_cast<std::uint16_t>(z);
+        c.level = static_cast<std::uint8_t>(pl);
+        c.mixed = used_mask;
+        parents.push_back(c);
+      }
+  for (int level = g.top_level; level >= 0 && !parents.empty(); --level) {
+    const long long n = static_cast<long long>(parents.size());
+    const int n_blocks = static_cast<int>((n + kBlock - 1) / kBlock);
+    if (static_cast<int>(blocks.size()) < n_blocks) blocks.resize(n_blocks);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+    for (int b = 0; b < n_blocks; ++b) {
+      BlockOut& out = blocks[b];
+      out.clear();
+      const long long end = std::min(n, static_cast<long long>(b + 1) * kBlock);
+      for (long long i = static_cast<long long>(b) * kBlock; i < end; ++i)
+        splitParent(parents[i], level, ctx, out);
+    }
+    next.clear();
+    std::vector<Cell>& mixed_target = level == 0 ? surface : next;
+    for (int b = 0; b < n_blocks; ++b) {
+      tested[g.top_level - level] += blocks[b].tested;
+      inside.insert(inside.end(), blocks[b].inside.begin(), blocks[b].inside.end());
+      mixed_target.insert(mixed_target.end(), blocks[b].mixed.begin(), blocks[b].mixed.end());
+    }
+    parents.swap(next);
+  }
+}
+
+// Fills h's brick lookup (detail/hull_data.h) from the kept cells.
+void buildBricks(HullData& h, const std::vector<Cell>& inside, const std::vector<Cell>& surface,
+                 int threads) {
+  if (inside.empty() && surface.empty()) return;
+  Eigen::Vector3i lo = h.dims, hi = Eigen::Vector3i::Zero();
+  auto extend = [&](const Cell& c) {
+    const int s = 1 << c.level;
+    const int idx[3] = {c.x, c.y, c.z};
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], idx[a] * s);
+      hi[a] = std::max(hi[a], std::min((idx[a] + 1) * s, h.dims[a]));
+    }
+  };
+  for (const Cell& c : inside) extend(c);
+  for (const Cell& c : surface) extend(c);
+  for (int a = 0; a < 3; ++a) {
+    h.brick_min[a] = lo[a] >> detail::kBrickShift;
+    h.brick_dims[a] = ((hi[a] - 1) >> detail::kBrickShift) - h.brick_min[a] + 1;
+  }
+  const Eigen::Vector3i bd = h.brick_dims;
+  h.brick_index.assign(static_cast<size_t>(bd.x()) * bd.y() * bd.z(), detail::kBrickEmpty);
+  auto brickOf = [&](int vx, int vy, int vz) {
+    const int bx = (vx >> detail::kBrickShift) - h.brick_min.x();
+    const int by = (vy >> detail::kBrickShift) - h.brick_min.y();
+    const int bz = (vz >> detail::kBrickShift) - h.brick_min.z();
+    return (static_cast<size_t>(bz) * bd.y() + by) * bd.x() + bx;
+  };
+  auto voxelBits = [](const Cell& c) {
+    const int s = 1 << c.level;
+    std::uint64_t bits = 0;
+    for (int dz = 0; dz < s; ++dz)
+      for (int dy = 0; dy < s; ++dy)
+        for (int dx = 0; dx < s; ++dx) {
+          const int vx = c.x * s + dx, vy = c.y * s + dy, vz = c.z * s + dz;
+          bits |= std::uint64_t{1} << (((vz & 3) << 4) | ((vy & 3) << 2) | (vx & 3));
+        }
+    return bits;
+  };
+  // Inside cells of a brick's size or more fill whole bricks (serial: there are few).
+  std::vector<const Cell*> small_inside;
+  for (const Cell& c : inside) {
+    if (c.level < detail::kBrickShift) {
+      small_inside.push_back(&c);
+      continue;
+    }
+    const int s = 1 << c.level;
+    const int x1 = std::min((c.x + 1) * s, h.dims.x()), y1 = std::min((c.y + 1) * s, h.dims.y()),
+              z1 = std::min((c.z + 1) * s, h.dims.z());
+    for (int z = c.z * s; z < z1; z += detail::kBrickEdge)
+      for (int y = c.y * s; y < y1; y += detail::kBrickEdge)
+        for (int x = c.x * s; x < x1; x += detail::kBrickEdge)
+          h.brick_index[brickOf(x, y, z)] = detail::kBrickFull;
+  }
+  // Smaller cells: mark their bricks, number the marked bricks in grid order (deterministic),
+  // then OR the cells' voxel bits into them.
+  constexpr std::int32_t kMarked = -3;
+  const long long n_small = static_cast<long long>(small_inside.size());
+  const long long n_surface = static_cast<long long>(surface.size());
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(static) nowait
+    for (long long i = 0; i < n_small; ++i) {
+      const Cell& c = *small_inside[i];
+      const int s = 1 << c.level;
+      __atomic_store_n(&h.brick_index[brickOf(c.x * s, c.y * s, c.z * s)], kMarked,
+                       __ATOMIC_RELAXED);
+    }
+#pragma omp for schedule(static)
+    for (long long i = 0; i < n_surface; ++i) {
+      const Cell& c = surface[i];
+      __atomic_store_n(&h.brick_index[brickOf(c.x, c.y, c.z)], kMarked, __ATOMIC_RELAXED);
+    }
+  }
+  std::int32_t n_bricks = 0;
+  for (std::int32_t& b : h.brick_index)
+    if (b == kMarked) b = n_bricks++;
+  h.bricks.assign(n_bricks, detail::Brick{});
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(static) nowait
+    for (long long i = 0; i < n_small; ++i) {
+      const Cell& c = *small_inside[i];
+      const int s = 1 << c.level;
+      detail::Brick& b = h.bricks[h.brick_index[brickOf(c.x * s, c.y * s, c.z * s)]];
+      __atomic_fetch_or(&b.inside, voxelBits(c), __ATOMIC_RELAXED);
+    }
+#pragma omp for schedule(static)
+    for (long long i = 0; i < n_surface; ++i) {
+      const Cell& c = surface[i];
+      detail::Brick& b = h.bricks[h.brick_index[brickOf(c.x, c.y, c.z)]];
+      __atomic_fetch_or(&b.surface, voxelBits(c), __ATOMIC_RELAXED);
+    }
+  }
+  std::uint32_t total = 0;
+  for (detail::Brick& b : h.bricks) {
+    b.offset = total;
+    total += static_cast<std::uint32_t>(__builtin_popcountll(b.surface));
+  }
+  h.surface_info.resize(total);
+  h.surface_voxel.resize(total);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long long i = 0; i < n_surface; ++i) {
+    const Cell& c = surface[i];
+    const detail::Brick& b = h.bricks[h.brick_index[brickOf(c.x, c.y, c.z)]];
+    const std::uint64_t m = std::uint64_t{1} << (((c.z & 3) << 4) | ((c.y & 3) << 2) | (c.x & 3));
+    const std::uint32_t pos = b.offset + __builtin_popcountll(b.surface & (m - 1));
+    h.surface_info[pos].mixed = c.mixed;
+    h.surface_info[pos].n_out = c.n_out;
+    h.surface_info[pos].n_in = c.n_in;
+    h.surface_voxel[pos] = Eigen::Matrix<std::int32_t, 3, 1>(c.x, c.y, c.z);
+  }
+}
+
+}  // namespace
+
+VisualHull Carver::carve(const Silhouettes& silhouettes) {
+  const auto start = std::chrono::steady_clock::now();
+  Impl& im = *impl_;
+  const int n = static_cast<int>(im.cameras.size());
+  if (static_cast<int>(silhouettes.masks.size()) != n)
+    throw Error("carve: got " + std::to_string(silhouettes.masks.size()) + " silhouettes for " +
+                    std::to_string(n) + " cameras",
+                ErrorContext{"", "", std::nullopt, "masks"});
+  if (!silhouettes.dropped.empty() && static_cast<int>(silhouettes.dropped.size()) != n)
+    throw Error("carve: got " + std::to_string(silhouettes.dropped.size()) +
+                    " drop reasons for " + std::to_string(n) + " cameras",
+                ErrorContext{"", "", std::nullopt, "dropped"});
+  const int threads = threadCount(im.options.threads);
+
+  auto data = std::make_shared<HullData>();
+  data->origin = im.grid.origin;
+  data->voxel = im.grid.voxel;
+  data->dims = im.grid.dims;
+  data->k = im.options.k;
+  data->min_views = im.options.min_views;
+  data->cameras = im.models;
+  data->frames.resize(n);
+
+  VisualHull hull;
+  hull.origin = im.grid.origin;
+  hull.voxel_m = im.grid.voxel;
+  hull.levels = im.grid.top_level + 1;
+  hull.stats.cells_tested.assign(hull.levels, 0);
+  for (int c = 0; c < n; ++c) {
+    const std::string& name = im.cameras[c].camera.name;
+    const cv::Mat& mask = silhouettes.masks[c];
+    std::string reason = silhouettes.dropped.empty() ? std::string() : silhouettes.dropped[c];
+    if (reason.empty() && mask.empty()) reason = "no silhouette (empty mask)";
+    if (!reason.empty()) {
+      hull.stats.cameras_dropped.push_back(name);
+      hull.stats.drop_reasons.push_back(reason);
+      continue;
+    }
+    if (mask.type() != CV_8UC1)
+      throw Error("carve: silhouette must be 8-bit single-channel (got OpenCV type " +
+                      std::to_string(mask.type()) + ")",
+                  ErrorContext{"", name, std::nullopt, "masks"});
+    if (mask.cols != im.cameras[c].camera.width || mask.rows != im.cameras[c].camera.height)
+      throw Error("carve: silhouette is " + std::to_string(mask.cols) + "x" +
+                      std::to_string(mask.rows) + " but the camera is " +
+                      std::to_string(im.cameras[c].camera.width) + "x" +
+                      std::to_string(im.cameras[c].camera.height),
+                  ErrorContext{"", name, std::nullopt, "masks"});
+    data->used.push_back(c);
+    hull.stats.cameras_used.push_back(name);
+  }
+  const int n_used = static_cast<int>(data->used.size());
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int i = 0; i < n_used; ++i)
+    data->frames[data->used[i]] = detail::makeFrameCam(silhouettes.masks[data->used[i]]);
+
+  std::vector<Cell> inside, surface;
+  if (n_used >= im.options.min_views) {
+    CarveContext ctx{im.models.get(), &data->frames, im.grid, im.options.k, im.options.min_views};
+    carveLevels(ctx, data->usedMask(), threads, im.blocks, inside, surface,
+                hull.stats.cells_tested);
+  }
+  buildBricks(*data, inside, surface, threads);
+
+  hull.inside.resize(inside.size());
+  hull.surface.resize(surface.size());
+  std::transform(inside.begin(), inside.end(), hull.inside.begin(), toHullCell);
+  std::transform(surface.begin(), surface.end(), hull.surface.begin(), toHullCell);
+  hull.stats.inside_cells = static_cast<long long>(inside.size());
+  hull.stats.surface_cells = static_cast<long long>(surface.size());
+  hull.data = data;
+  im.last = data;
+  hull.stats.ms = msSince(start);
+  return hull;
+}
+
+bool Carver::inside(const Eigen::Vector3d& p_world) const {
+  return impl_->last && impl_->last->inside(p_world.data());
+}
+
+bool Carver::inside(const VisualHull& hull, const Eigen::Vector3d& p_world) const {
+  return hull.data && hull.data->inside(p_world.data());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Depth: first hull surface along each pixel's ray
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+// Amanatides & Woo (1987) traversal of a grid of unit cells, p(t) = p0 + t dir.
+struct Dda {
+  int i[3], step[3];
+  double t_max[3], t_delta[3];
+  void init(const double* p0, const double* dir, double t, const int* lo, const int* hi) {
+    for (int a = 0; a < 3; ++a) {
+      const double p = p0[a] + t * dir[a];
+      const int c = std::clamp(detail::floorToInt(std::clamp(p, -1e7, 1e7)), lo[a], hi[a] - 1);
+      i[a] = c;
+      if (dir[a] > 0) {
+        step[a] = 1;
+        t_delta[a] = 1.0 / dir[a];
+        t_max[a] = (c + 1 - p0[a]) / dir[a];
+      } else if (dir[a] < 0) {
+        step[a] = -1;
+        t_delta[a] = -1.0 / dir[a];
+        t_max[a] = (c - p0[a]) / dir[a];
+      } else {
+        step[a] = 0;
+        t_delta[a] = kInf;
+        t_max[a] = kInf;
+      }
+    }
+  }
+  double exitT() const { return std::min(t_max[0], std::min(t_max[1], t_max[2])); }
+  // Steps into the next cell; false when it leaves [lo, hi).
+  bool advance(const int* lo, const int* hi) {
+    const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2)
+                                      : (t_max[1] < t_max[2] ? 1 : 2);
+    i[a] += step[a];
+    t_max[a] += t_delta[a];
+    return i[a] >= lo[a] && i[a] < hi[a];
+  }
+};
+
+struct RayQuery {
+  const HullData* h;
+  double o[3], d[3];  // world: point(t) = o + t d, t = depth along the camera's axis
+  double go[3], gd[3];  // the same in finest-voxel units from the grid origin
+  double step_t;        // sampling step inside surface voxels, in t
+  // The ray in each witness camera's frame, q(t) = qo + t qd: qo per call, qd per pixel and
+  // camera on first use (bit set in qd_valid).
+  const double (*qo)[3];
+  mutable double qd[detail::kMaxCameras][3];
+  mutable std::uint32_t qd_valid = 0;
+
+  void setDirection(const Eigen::Vector3d& dir) {
+    for (int a = 0; a < 3; ++a) {
+      d[a] = dir[a];
+      gd[a] = dir[a] / h->voxel;
+    }
+    qd_valid = 0;
+  }
+  // The k-of-n rule at o + t d, as HullData::insideGiven, with the camera coordinates
+  // interpolated along the ray.
+  bool insideAt(double t, const detail::SurfaceInfo& info) const {
+    int n_out = info.n_out, views = info.n_out + info.n_in;
+    if (n_out > h->k) return false;
+    std::uint32_t mixed = info.mixed;
+    while (mixed) {
+      const int c = __builtin_ctz(mixed);
+      mixed &= mixed - 1;
+      const CameraModel& cam = (*h->cameras)[c];
+      if (!((qd_valid >> c) & 1)) {
+        qd[c][0] = cam.R[0] * d[0] + cam.R[1] * d[1] + cam.R[2] * d[2];
+        qd[c][1] = cam.R[3] * d[0] + cam.R[4] * d[1] + cam.R[5] * d[2];
+        qd[c][2] = cam.R[6] * d[0] + cam.R[7] * d[1] + cam.R[8] * d[2];
+        qd_valid |= 1u << c;
+      }
+      const double q[3] = {qo[c][0] + t * qd[c][0], qo[c][1] + t * qd[c][1],
+                           qo[c][2] + t * qd[c][2]};
+      const CamState s = detail::cameraPointState(cam, h->frames[c], q);
+      if (s == detail::kOut) {
+        if (++n_out > h->k) return false;
+        ++views;
+      } else if (s == detail::kIn) {
+        ++views;
+      }
+    }
+    return views >= h->min_views;
+  }
+
+  // Where the ray enters the hull between t_out (outside) and t_in (inside), k = 0, without
+  // bisection: in each undecided camera that sees t_out outside, the ray's image moves from an
+  // outside pixel into a neighbouring inside one and crosses their shared edge at a fraction s
+  // of the way (the image of a sub-voxel segment is straight to far below a pixel); the hull
+  // starts where the last camera lets it in. False (bisect instead) when some camera's image
+  // jumps diagonally or by more than a pixel, leaves the image, or k > 0.
+  bool crossing(const detail::SurfaceInfo& info, double t_out, double t_in, double* hit) const {
+    if (h->k != 0) return false;
+    double t_hit = t_out;
+    std::uint32_t mixed = info.mixed;
+    while (mixed) {
+      const int c = __builtin_ctz(mixed);
+      mixed &= mixed - 1;
+      const CameraModel& cam = (*h->cameras)[c];
+      const detail::FrameCam& frame = h->frames[c];
+      const double qa[3] = {qo[c][0] + t_out * qd[c][0], qo[c][1] + t_out * qd[c][1],
+                            qo[c][2] + t_out * qd[c][2]};
+      const double qb[3] = {qo[c][0] + t_in * qd[c][0], qo[c][1] + t_in * qd[c][1],
+                            qo[c][2] + t_in * qd[c][2]};
+      double ua, va, ub, vb;
+      if (!cam.project(qa, ua, va) || !cam.project(qb, ub, vb)) return false;
+      const int iua = detail::floorToInt(ua + 0.5), iva = detail::floorToInt(va + 0.5);
+      const int iub = detail::floorToInt(ub + 0.5), ivb = detail::floorToInt(vb + 0.5);
+      if (iua < 0 || iva < 0 || iub < 0 || ivb < 0 || iua >= cam.width || iub >= cam.width ||
+          iva >= cam.height || ivb >= cam.height)
+        return false;
+      if (frame.insidePixel(iua, iva)) continue;  // already inside at t_out
+      double s;
+      if (iva == ivb && std::abs(iua - iub) == 1)
+        s = (0.5 * (iua + iub) - ua) / (ub - ua);
+      else if (iua == iub && std::abs(iva - ivb) == 1)
+        s = (0.5 * (iva + ivb) - va) / (vb - va);
+      else
+        return false;
+      t_hit = std::max(t_hit, t_out + std::clamp(s, 0.0, 1.0) * (t_in - t_out));
+    }
+    *hit = t_hit;
+    return true;
+  }
+
+  // The hull's first point in a surface voxel's segment [ta, tb] (ta known outside): samples
+  // at step_t, then bisection between the last outside and the first inside sample.
+  bool searchVoxel(const detail::SurfaceInfo& info, double ta, double tb, double* hit) const {
+    const int n = std::max(1, static_cast<int>(std::ceil((tb - ta) / step_t)));
+    const double step = (tb - ta) / n;
+    double prev = ta;
+    for (int s = 1; s <= n; ++s) {
+      const double t = s == n ? tb : ta + s * step;
+      if (insideAt(t, info)) {
+        if (crossing(info, prev, t, hit)) return true;
+        double out = prev, in = t;
+        for (int it = 0; it < kRefineIterations; ++it) {
+          const double mid = 0.5 * (out + in);
+          (insideAt(mid, info) ? in : out) = mid;
+        }
+        *hit = 0.5 * (out + in);
+        return true;
+      }
+      prev = t;
+    }
+    return false;
+  }
+
+  // Walks the voxels of a mixed brick over [ta, tb].
+  bool searchBrick(const detail::Brick& brick, const int* brick_cell, double ta, double tb,
+                   double* hit) const {
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = (brick_cell[a] + h->brick_min[a]) << detail::kBrickShift;
+      hi[a] = lo[a] + detail::kBrickEdge;
+    }
+    Dda dda;
+    dda.init(go, gd, ta, lo, hi);
+    double t = ta;
+    while (t < tb) {
+      const double te = std::min(dda.exitT(), tb);
+      if (te > t) {
+        const int bit = ((dda.i[2] & 3) << 4) | ((dda.i[1] & 3) << 2) | (dda.i[0] & 3);
+        const std::uint64_t m = std::uint64_t{1} << bit;
+        if (brick.inside & m) {
+          *hit = t;
+          return true;
+        }
+        if (brick.surface & m) {
+          const std::uint32_t idx = brick.offset + __builtin_popcountll(brick.surface & (m - 1));
+          if (searchVoxel(h->surface_info[idx], t, te, hit)) return true;
+        }
+        t = te;
+      }
+      if (!dda.advance(lo, hi)) break;
+    }
+    return false;
+  }
+
+  // Depth (t) of the first hull point along the ray at or beyond t_start; +inf when it misses.
+  double run(double t_start) const {
+    double t0 = t_start, t1 = kInf;
+    int lo[3] = {0, 0, 0}, hi[3];
+    double bo[3], bd[3];
+    for (int a = 0; a < 3; ++a) {
+      hi[a] = h->brick_dims[a];
+      bo[a] = go[a] / detail::kBrickEdge - h->brick_min[a];
+      bd[a] = gd[a] / detail::kBrickEdge;
+      if (bd[a] == 0.0) {
+        if (bo[a] < 0 || bo[a] > hi[a]) return kInf;
+        continue;
+      }
+      double ta = -bo[a] / bd[a], tb = (hi[a] - bo[a]) / bd[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (!(t0 < t1)) return kInf;
+    Dda dda;
+    dda.init(bo, bd, t0, lo, hi);
+    double t = t0;
+    while (t < t1) {
+      const double te = std::min(dda.exitT(), t1);
+      if (te > t) {
+        const std::int32_t b =
+            h->brick_index[(static_cast<size_t>(dda.i[2]) * hi[1] + dda.i[1]) * hi[0] + dda.i[0]];
+        if (b == detail::kBrickFull) return t;
+        double hit;
+        if (b >= 0 && searchBrick(h->bricks[b], dda.i, t, te, &hit)) return hit;
+        t = te;
+      }
+      if (!dda.advance(lo, hi)) break;
+    }
+    return kInf;
+  }
+};
+
+}  // namespace
+
+namespace {
+
+constexpr int kBoundShift = 2;  // the depth lower bound is kept per 4 x 4 pixels
+
+// A lower bound of the hull's depth per 4 x 4 pixel block of the camera: super-bricks (4^3
+// bricks) that hold any kept cell, projected (8 corners, distortion pad) with the nearest
+// corner's depth. Every hull point seen at a pixel lies in such a super-brick whose footprint
+// covers the pixel, so no ray starts past its first hull point; +inf blocks see no hull at
+// all. Returns false when some super-brick is not wholly in front of the camera (no bound).
+bool depthLowerBound(const HullData& h, const CameraModel& cam, cv::Mat& bound) {
+  const int w = (cam.width + 3) >> kBoundShift, ht = (cam.height + 3) >> kBoundShift;
+  bound.create(ht, w, CV_32FC1);
+  bound.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
+  constexpr int kGroup = 4;  // bricks per super-brick edge
+  const Eigen::Vector3i bd = h.brick_dims;
+  const Eigen::Vector3i sd = (bd.array() + kGroup - 1) / kGroup;
+  std::vector<std::uint8_t> occupied(static_cast<size_t>(sd.x()) * sd.y() * sd.z(), 0);
+  for (int z = 0; z < bd.z(); ++z)
+    for (int y = 0; y < bd.y(); ++y)
+      for (int x = 0; x < bd.x(); ++x)
+        if (h.brick_index[(static_cast<size_t>(z) * bd.y() + y) * bd.x() + x] !=
+            detail::kBrickEmpty)
+          occupied[(static_cast<size_t>(z / kGroup) * sd.y() + y / kGroup) * sd.x() + x / kGroup] = 1;
+  const double edge = h.voxel * detail::kBrickEdge * kGroup;
+  const Eigen::Vector3d base =
+      h.origin + h.voxel * detail::kBrickEdge * h.brick_min.cast<double>();
+  for (int z = 0; z < sd.z(); ++z)
+    for (int y = 0; y < sd.y(); ++y)
+      for (int x = 0; x < sd.x(); ++x) {
+        if (!occupied[(static_cast<size_t>(z) * sd.y() + y) * sd.x() + x]) continue;
+        double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf, z_near = kInf;
+        double xmin = kInf, xmax = -kInf, ymin = kInf, ymax = -kInf;
+        for (int c = 0; c < 8; ++c) {
+          const Eigen::Vector3d p =
+              base + edge * Eigen::Vector3d(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2));
+          double q[3], u, v;
+          cam.toCamera(p.data(), q);
+          if (!cam.project(q, u, v)) return false;
+          z_near = std::min(z_near, q[2]);
+          umin = std::min(umin, u);
+          umax = std::max(umax, u);
+          vmin = std::min(vmin, v);
+          vmax = std::max(vmax, v);
+          xmin = std::min(xmin, q[0] / q[2]);
+          xmax = std::max(xmax, q[0] / q[2]);
+          ymin = std::min(ymin, q[1] / q[2]);
+          ymax = std::max(ymax, q[1] / q[2]);
+        }
+        const double dx = xmax - xmin, dy = ymax - ymin;
+        const double pad = cam.pad_per_diam2 * (dx * dx + dy * dy) + 1.0;
+        const int u0 = std::max(0, detail::floorToInt(std::max(umin - pad, -1e7) + 0.5));
+        const int u1 = std::min(cam.width - 1, detail::floorToInt(std::min(umax + pad, 1e7) + 0.5));
+        const int v0 = std::max(0, detail::floorToInt(std::max(vmin - pad, -1e7) + 0.5));
+        const int v1 = std::min(cam.height - 1, detail::floorToInt(std::min(vmax + pad, 1e7) + 0.5));
+        const float zf = static_cast<float>(z_near);
+        for (int bv = v0 >> kBoundShift; bv <= v1 >> kBoundShift && v0 <= v1; ++bv) {
+          float* row = bound.ptr<float>(bv);
+          for (int bu = u0 >> kBoundShift; bu <= u1 >> kBoundShift && u0 <= u1; ++bu)
+            row[bu] = std::min(row[bu], zf);
+        }
+      }
+  return true;
+}
+
+}  // namespace
+
+cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
+                      const cv::Mat& silhouette) const {
+  const Camera& cam = camera.camera;
+  cam.validate();
+  if (!silhouette.empty()) {
+    if (silhouette.type() != CV_8UC1)
+      throw Error("depth: silhouette must be 8-bit single-channel",
+                  ErrorContext{"", cam.name, std::nullopt, "silhouette"});
+    if (silhouette.cols != cam.width || silhouette.rows != cam.height)
+      throw Error("depth: silhouette is " + std::to_string(silhouette.cols) + "x" +
+                      std::to_string(silhouette.rows) + " but the camera is " +
+                      std::to_string(cam.width) + "x" + std::to_string(cam.height),
+                  ErrorContext{"", cam.name, std::nullopt, "silhouette"});
+  }
+  cv::Mat out(cam.height, cam.width, CV_32FC1);
+  if (!hull.data || !hull.data->hasCells()) {
+    out.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
+    return out;
+  }
+  const int threads = threadCount(impl_->options.threads);
+  const std::shared_ptr<const RayTable> table = impl_->rayTable(cam, threads);
+  const HullData& h = *hull.data;
+  CameraModel model = table->model;
+  {
+    const Pose T_cam_world = camera.T_world_cam.inverse();
+    for (int r = 0; r < 3; ++r) {
+      for (int col = 0; col < 3; ++col) model.R[r * 3 + col] = T_cam_world.linear()(r, col);
+      model.t[r] = T_cam_world.translation()[r];
+    }
+  }
+  cv::Mat bound;
+  const bool bounded = depthLowerBound(h, model, bound);
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  const double sample_m = h.voxel / kSamplesPerVoxel;
+  // The camera centre in every witness camera's frame (the rays' common origin there).
+  double qo[detail::kMaxCameras][3] = {};
+  for (size_t c = 0; c < h.cameras->size(); ++c) (*h.cameras)[c].toCamera(centre.data(), qo[c]);
+#pragma omp parallel for schedule(dynamic, 4) num_threads(threads)
+  for (int v = 0; v < cam.height; ++v) {
+    float* row = out.ptr<float>(v);
+    std::fill(row, row + cam.width, std::numeric_limits<float>::infinity());
+    const std::uint8_t* sil = silhouette.empty() ? nullptr : silhouette.ptr<std::uint8_t>(v);
+    const float* xy = table->xy.data() + 2 * static_cast<size_t>(v) * cam.width;
+    const float* lower = bounded ? bound.ptr<float>(v >> kBoundShift) : nullptr;
+    RayQuery q;
+    q.h = &h;
+    q.qo = qo;
+    for (int a = 0; a < 3; ++a) {
+      q.o[a] = centre[a];
+      q.go[a] = (centre[a] - h.origin[a]) / h.voxel;
+    }
+    for (int u = 0; u < cam.width; ++u) {
+      if (sil && sil[u] <= 127) continue;
+      const double t_start = lower ? lower[u >> kBoundShift] : 0.0;
+      if (t_start == kInf) continue;  // no hull near this pixel's ray
+      const float x = xy[2 * u], y = xy[2 * u + 1];
+      if (std::isnan(x)) continue;
+      const Eigen::Vector3d d = R * Eigen::Vector3d(x, y, 1.0);
+      q.setDirection(d);
+      q.step_t = sample_m / d.norm();
+      row[u] = static_cast<float>(q.run(t_start));
+    }
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mesh: surface nets over the surface voxels
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+constexpr int kSmoothPairs = 3;  // Taubin (1995) lambda/mu pairs: smooths without shrinking
+constexpr double kTaubinLambda = 0.5, kTaubinMu = -0.53;
+
+// Corner c = dx + 2 dy + 4 dz of a voxel; lattice of a brick: 5^3 points.
+int latticeIndex(int lx, int ly, int lz) { return (lz * 5 + ly) * 5 + lx; }
+
+struct MeshBuilder {
+  const HullData& h;
+  int threads;
+  std::vector<std::int8_t> sign;     // per brick, 125 lattice signs (-1 unknown, 0 out, 1 in)
+  std::vector<std::int32_t> brick_of;  // surface voxel -> brick
+  std::vector<std::uint8_t> code;    // surface voxel -> corner inside bits
+  std::vector<Eigen::Vector3d> vertex;
+
+  Eigen::Vector3d latticePoint(int x, int y, int z) const {
+    return h.origin + h.voxel * Eigen::Vector3d(x, y, z);
+  }
+  bool cornerInside(std::int64_t s, int c) const {
+    return (code[s] >> c) & 1;
+  }
+
+  // Lattice signs from the exact test with every used camera (the same answer for a point
+  // shared by two bricks); the volume's boundary is outside, which closes the hull there.
+  void computeSigns() {
+    const int n_bricks = static_cast<int>(h.bricks.size());
+    sign.assign(static_cast<size_t>(n_bricks) * 125, -1);
+    brick_of.assign(h.surface_info.size(), -1);
+    code.assign(h.surface_info.size(), 0);
+    const std::uint32_t all = h.usedMask();
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
+    for (int b = 0; b < n_bricks; ++b) {
+      const detail::Brick& brick = h.bricks[b];
+      const int count = __builtin_popcountll(brick.surface);
+      std::int8_t* bs = sign.data() + static_cast<size_t>(b) * 125;
+      for (int k = 0; k < count; ++k) {
+        const std::int64_t s = brick.offset + k;
+        brick_of[s] = b;
+        const auto& v = h.surface_voxel[s];
+        std::uint8_t bits = 0;
+        for (int c = 0; c < 8; ++c) {
+          const int gx = v.x() + (c & 1), gy = v.y() + ((c >> 1) & 1), gz = v.z() + (c >> 2);
+          const int li = latticeIndex(gx - (v.x() & ~3), gy - (v.y() & ~3), gz - (v.z() & ~3));
+          if (bs[li] < 0) {
+            const bool boundary = gx <= 0 || gy <= 0 || gz <= 0 || gx >= h.dims.x() ||
+                                  gy >= h.dims.y() || gz >= h.dims.z();
+            const Eigen::Vector3d p = latticePoint(gx, gy, gz);
+            bs[li] = !boundary && h.insideGiven(p.data(), all, 0, 0);
+          }
+          bits |= static_cast<std::uint8_t>(bs[li] << c);
+        }
+        code[s] = bits;
+      }
+    }
+  }
+
+  // Vertex of each voxel the surface crosses: mean of its edges' crossings, each found by
+  // bisection with the voxel's own undecided cameras.
+  void computeVertices() {
+    const std::int64_t n = static_cast<std::int64_t>(h.surface_info.size());
+    vertex.assign(n, Eigen::Vector3d::Zero());
+#pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
+    for (std::int64_t s = 0; s < n; ++s) {
+      if (code[s] == 0 || code[s] == 255) continue;
+      const detail::SurfaceInfo& info = h.surface_info[s];
+      const auto& v = h.surface_voxel[s];
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      int count = 0;
+      for (int c = 0; c < 8; ++c) {
+        for (int a = 0; a < 3; ++a) {
+          const int c2 = c | (1 << a);
+          if (c2 == c || cornerInside(s, c) == cornerInside(s, c2)) continue;
+          Eigen::Vector3d in = latticePoint(v.x() + (c & 1), v.y() + ((c >> 1) & 1), v.z() + (c >> 2));
+          Eigen::Vector3d out =
+              latticePoint(v.x() + (c2 & 1), v.y() + ((c2 >> 1) & 1), v.z() + (c2 >> 2));
+          if (!cornerInside(s, c)) std::swap(in, out);
+          for (int it = 0; it < kRefineIterations; ++it) {
+            const Eigen::Vector3d mid = 0.5 * (in + out);
+            (h.insideGiven(mid.data(), info.mixed, info.n_out, info.n_in) ? in : out) = mid;
+          }
+          sum += 0.5 * (in + out);
+          ++count;
+        }
+      }
+      vertex[s] = sum / count;
+    }
+  }
+
+  bool hasVertex(std::int64_t s) const { return code[s] != 0 && code[s] != 255; }
+
+  // One quad per lattice edge the surface crosses, owned by the voxel at its low corner in the
+  // two other axes; wound counter-clockwise seen from the outside end of the edge.
+  std::vector<Eigen::Vector3i> faces(long long* anomalies) const {
+    const std::int64_t n = static_cast<std::int64_t>(h.surface_info.size());
+    std::vector<std::vector<Eigen::Vector3i>> per_thread(threads);
+    long long bad = 0;
+#pragma omp parallel num_threads(threads) reduction(+ : bad)
+    {
+      std::vector<Eigen::Vector3i>& out = per_thread[omp_get_thread_num()];
+#pragma omp for schedule(static)
+      for (std::int64_t s = 0; s < n; ++s) {
+        if (!hasVertex(s)) continue;
+        const auto& v = h.surface_voxel[s];
+        // Per axis: the edge's two corners and the 4 voxels around it (offsets from v) in
+        // counter-clockwise order seen from +axis.
+        static const int kLow[3] = {6, 5, 3};
+        static const int kAround[3][4][3] = {
+            {{0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {0, 0, 1}},
+            {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}},
+            {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}};
+        for (int a = 0; a < 3; ++a) {
+          const bool low_in = cornerInside(s, kLow[a]), high_in = cornerInside(s, 7);
+          if (low_in == high_in) continue;
+          std::int64_t ids[4];
+          bool ok = true;
+          for (int q = 0; q < 4 && ok; ++q) {
+            const int* o = kAround[a][q];
+            ok = h.voxelKind(v.x() + o[0], v.y() + o[1], v.z() + o[2], &ids[q]) ==
+                     detail::kVoxelSurface &&
+                 hasVertex(ids[q]);
+          }
+          if (!ok) {
+            ++bad;
+            continue;
+          }
+          if (!low_in) std::swap(ids[1], ids[3]);  // outward normal is -axis: reverse
+          // Split along the shorter diagonal.
+          const double d02 = (vertex[ids[0]] - vertex[ids[2]]).squaredNorm();
+          const double d13 = (vertex[ids[1]] - vertex[ids[3]]).squaredNorm();
+          auto tri = [&](int i, int j, int k) {
+            out.emplace_back(static_cast<int>(ids[i]), static_cast<int>(ids[j]),
+                             static_cast<int>(ids[k]));
+          };
+          if (d02 <= d13) {
+            tri(0, 1, 2);
+            tri(0, 2, 3);
+          } else {
+            tri(0, 1, 3);
+            tri(1, 2, 3);
+          }
+        }
+      }
+    }
+    *anomalies = bad;
+    std::vector<Eigen::Vector3i> all;
+    for (auto& f : per_thread) all.insert(all.end(), f.begin(), f.end());
+    return all;
+  }
+};
+
+// Taubin smoothing over the mesh's vertex neighbours.
+void smooth(std::vector<Eigen::Vector3d>& p, const std::vector<Eigen::Vector3i>& faces,
+            int threads) {
+  const int n = static_cast<int>(p.size());
+  std::vector<int> start(n + 1, 0), adj;
+  for (const auto& f : faces)
+    for (int i = 0; i < 3; ++i) start[f[i] + 1] += 2;
+  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+  adj.resize(start[n]);
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (const auto& f : faces)
+    for (int i = 0; i < 3; ++i) {
+      adj[fill[f[i]]++] = f[(i + 1) % 3];
+      adj[fill[f[i]]++] = f[(i + 2) % 3];
+    }
+  std::vector<Eigen::Vector3d> next(n);
+  for (int it = 0; it < 2 * kSmoothPairs; ++it) {
+    const double w = it % 2 == 0 ? kTaubinLambda : kTaubinMu;
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (int i = 0; i < n; ++i) {
+      if (start[i + 1] == start[i]) {
+        next[i] = p[i];
+        continue;
+      }
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (int j = start[i]; j < start[i + 1]; ++j) mean += p[adj[j]];
+      mean /= start[i + 1] - start[i];
+      next[i] = p[i] + w * (mean - p[i]);
+    }
+    p.swap(next);
+  }
+}
+
+}  // namespace
+
+TriangleMesh Carver::mesh(const VisualHull& hull) const {
+  TriangleMesh mesh;
+  if (!hull.data || hull.data->surface_info.empty()) return mesh;
+  MeshBuilder b{*hull.data, threadCount(impl_->options.threads), {}, {}, {}, {}};
+  b.computeSigns();
+  b.computeVertices();
+  long long anomalies = 0;
+  std::vector<Eigen::Vector3i> faces = b.faces(&anomalies);
+  // Keep only the vertices of voxels the surface crosses, in surface order.
+  const std::int64_t n = static_cast<std::int64_t>(b.vertex.size());
+  std::vector<int> id(n, -1);
+  std::vector<Eigen::Vector3d> p;
+  for (std::int64_t s = 0; s < n; ++s)
+    if (b.hasVertex(s)) {
+      id[s] = static_cast<int>(p.size());
+      p.push_back(b.vertex[s]);
+    }
+  for (auto& f : faces)
+    for (int i = 0; i < 3; ++i) f[i] = id[f[i]];
+  smooth(p, faces, b.threads);
+  std::vector<Eigen::Vector3d> normal(p.size(), Eigen::Vector3d::Zero());
+  for (const auto& f : faces) {
+    const Eigen::Vector3d nf = (p[f[1]] - p[f[0]]).cross(p[f[2]] - p[f[0]]);  // area-weighted
+    for (int i = 0; i < 3; ++i) normal[f[i]] += nf;
+  }
+  mesh.vertices.resize(p.size());
+  mesh.normals.resize(p.size());
+  for (size_t i = 0; i < p.size(); ++i) {
+    mesh.vertices[i] = p[i].cast<float>();
+    const double len = normal[i].norm();
+    mesh.normals[i] =
+        len > 0 ? Eigen::Vector3f((normal[i] / len).cast<float>()) : Eigen::Vector3f::UnitZ();
+  }
+  mesh.faces = std::move(faces);
+  return mesh;
+}
+
+}  // namespace previz::carving

@@ -1,0 +1,963 @@
+#include "carving/keyer.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <sstream>
+#include <vector>
+
+#include <omp.h>
+#include <opencv2/core/hal/intrin.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+
+namespace previz::carving {
+namespace {
+
+// Pixel classes of the first pass. Background <= kGarbage < kUnknown < foreground.
+constexpr std::uint8_t kScreen = 0;   // the lit or shadowed screen
+constexpr std::uint8_t kGarbage = 1;  // beyond the screen (dark studio), border-connected
+constexpr std::uint8_t kUnknown = 2;  // between: decided by the two-colour alpha
+constexpr std::uint8_t kFg = 3;       // clearly foreground
+// Looks like the garbage colour but not connected to the border: foreground (tag ink, a dark
+// neutral costume part surrounded by screen). Turned into kGarbage by the flood when reached.
+constexpr std::uint8_t kGarbageLike = 4;
+
+// True where every byte of the 8 at p is background (<= kGarbage).
+bool allBackground8(const std::uint8_t* p) {
+  std::uint64_t v;
+  std::memcpy(&v, p, 8);
+  return (v & 0xFEFEFEFEFEFEFEFEull) == 0;
+}
+
+// Screen chroma thresholds, as fractions of the screen's own q = (G - max(R, B)) / G.
+// A pixel within 15 % of the screen's q is screen (8-bit quantisation of a deep shadow moves q by
+// ~2 %; sensor noise of a few levels by ~5 %). At or below 40 % it is foreground: the studio's
+// greenish-grey costume sits at ~25 % of the screen's q, a 50/50 mix of screen and costume at
+// ~70 %, so the costume is foreground and its edges are unknown (two-colour alpha).
+constexpr float kScreenQFraction = 0.85f;
+constexpr float kFgQFraction = 0.40f;
+// Brightness accepted for screen, relative to the reference green (the key colour, or the
+// plate's own pixel): shadows and the cyclorama's falloff darken the screen, nothing brightens
+// it much. Below the floor chroma is too noisy to trust.
+constexpr float kMinScreenBrightness = 0.06f;  // no plate: of the key's median green
+constexpr float kMinPlateShadow = 0.15f;       // plate: darkest accepted shadow factor
+constexpr float kMaxPlateBrightening = 1.3f;
+// Alphas within this of the silhouette threshold are decided on the 3 x 3 mean (see key()),
+// when the window holds clear background and clear foreground (alpha within kClearAlpha of 0, 1).
+constexpr float kAmbiguousAlpha = 0.2f;
+constexpr float kClearAlpha = 0.15f;
+// Rows per parallel band of the first two passes.
+constexpr int kBandRows = 16;
+
+[[noreturn]] void fail(const std::string& message, const std::string& source) {
+  ErrorContext context;
+  context.file = source;
+  throw Error("keyer: " + (source.empty() ? "" : "'" + source + "': ") + message, context);
+}
+
+template <typename T>
+std::string str(T value) {
+  std::ostringstream s;
+  s << value;
+  return s.str();
+}
+
+// sRGB (IEC 61966-2-1) decode table for 8-bit values.
+const std::array<float, 256>& srgbToLinear() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double c = i / 255.0;
+      t[i] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+    }
+    return t;
+  }();
+  return table;
+}
+
+std::uint8_t linearToSrgb8(float linear) {
+  if (!(linear > 0)) return 0;
+  if (linear >= 1) return 255;
+  const double c = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+  return static_cast<std::uint8_t>(std::lround(c * 255.0));
+}
+
+// Smallest 8-bit code whose linear value is >= v (256 when none is).
+int srgbCodeAtLeast(float v) {
+  const auto& lut = srgbToLinear();
+  return static_cast<int>(std::lower_bound(lut.begin(), lut.end(), v) - lut.begin());
+}
+
+void checkImage(const cv::Mat& bgr8, const std::string& source) {
+  if (bgr8.empty()) fail("empty image", source);
+  if (bgr8.type() != CV_8UC3) {
+    fail("expected an 8-bit 3-channel BGR image, got type " + cv::typeToString(bgr8.type()),
+         source);
+  }
+}
+
+int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
+
+float chromaQ(float r, float g, float b) { return (g - std::max(r, b)) / std::max(g, 1e-6f); }
+
+// Key colour from the frame: the mode of a chromaticity histogram over green-dominant pixels
+// (the screen is the largest uniform area of a witness frame), then the per-channel median of
+// the samples in and around that bin. Sampled on a 4-px grid.
+bool estimateKeyColour(const cv::Mat& bgr8, cv::Vec3f& key) {
+  const auto& lut = srgbToLinear();
+  constexpr int kBins = 32, kStep = 4;
+  struct Sample {
+    float b, g, r;
+    int bin;
+  };
+  std::vector<Sample> samples;
+  samples.reserve(static_cast<size_t>(bgr8.rows / kStep + 1) * (bgr8.cols / kStep + 1));
+  std::vector<int> histogram(kBins * kBins, 0);
+  for (int y = kStep / 2; y < bgr8.rows; y += kStep) {
+    const std::uint8_t* p = bgr8.ptr<std::uint8_t>(y);
+    for (int x = kStep / 2; x < bgr8.cols; x += kStep) {
+      const float b = lut[p[3 * x]], g = lut[p[3 * x + 1]], r = lut[p[3 * x + 2]];
+      const float s = r + g + b;
+      if (s < 0.03f || g <= std::max(r, b)) continue;  // dark or not green-dominant
+      const int br = std::min(kBins - 1, static_cast<int>(r / s * kBins));
+      const int bb = std::min(kBins - 1, static_cast<int>(b / s * kBins));
+      const int bin = br * kBins + bb;
+      ++histogram[bin];
+      samples.push_back({b, g, r, bin});
+    }
+  }
+  const int mode = static_cast<int>(std::max_element(histogram.begin(), histogram.end()) -
+                                    histogram.begin());
+  if (histogram[mode] < 50) return false;
+  std::vector<float> cb, cg, cr;
+  for (const Sample& s : samples) {
+    if (std::abs(s.bin / kBins - mode / kBins) <= 1 && std::abs(s.bin % kBins - mode % kBins) <= 1) {
+      cb.push_back(s.b);
+      cg.push_back(s.g);
+      cr.push_back(s.r);
+    }
+  }
+  auto median = [](std::vector<float>& v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  key = cv::Vec3f(median(cb), median(cg), median(cr));
+  return key[1] > 0;
+}
+
+// Per-frame constants of the first pass. In linear light a pixel has the screen's chroma when
+// G - max(R, B) >= q G, i.e. lin(m8) <= k lin(g8) with m8 = max(r8, b8), k = 1 - q. Above the
+// sRGB curve's linear toe (code 10) lin(c) = ((c / 255 + 0.055) / 1.055)^2.4 exactly, so the
+// test is m8 + 14.025 <= k^(1 / 2.4) (g8 + 14.025): integer arithmetic on the 8-bit codes, no
+// decode, no division (16 pixels per SIMD step). Pixels darker than the toe fail the brightness
+// floor anyway.
+struct ClassifyTables {
+  int screen_k = 0, screen_c = 0;                // 128 m8 + c <= k g8: screen chroma
+  std::array<std::int16_t, 256> fg_min_m{};      // max(r8, b8) >= this: foreground chroma
+  int min_green8 = 0;                            // no plate: darkest screen green
+  bool screenChroma(int m8, int g8) const { return 128 * m8 + screen_c <= screen_k * g8; }
+};
+
+ClassifyTables makeTables(const ScreenModel& sm) {
+  const auto& lut = srgbToLinear();
+  ClassifyTables t;
+  const double kappa = std::pow(1.0 - kScreenQFraction * sm.key_q, 1.0 / 2.4);
+  t.screen_k = static_cast<int>(std::lround(128.0 * kappa));
+  t.screen_c = static_cast<int>(std::lround(128.0 * 14.025 * (1.0 - kappa)));
+  const float keep_fg = 1.0f - kFgQFraction * sm.key_q;
+  for (int g = 0; g < 256; ++g) {
+    // Smallest m with lin(m) >= keep_fg lin(g).
+    t.fg_min_m[g] = static_cast<std::int16_t>(srgbCodeAtLeast(keep_fg * lut[g]));
+  }
+  t.min_green8 = srgbCodeAtLeast(kMinScreenBrightness * sm.key_color[1]);
+  return t;
+}
+
+// Colour of the non-screen surroundings from the image border band (no clean plate): the pixels
+// of the two outermost rows / columns that are not screen. Returns an invalid model when the
+// border is (almost) all screen.
+GarbageModel estimateGarbage(const cv::Mat& bgr8, const ClassifyTables& tables) {
+  const auto& lut = srgbToLinear();
+  std::vector<float> rs, bs, sums;
+  auto take = [&](int y, int x) {
+    const cv::Vec3b& p = bgr8.at<cv::Vec3b>(y, x);
+    if (tables.screenChroma(std::max(p[0], p[2]), p[1]) && p[1] >= tables.min_green8) return;
+    const float b = lut[p[0]], g = lut[p[1]], r = lut[p[2]];
+    const float s = r + g + b;
+    if (s <= 1e-4f) return;
+    rs.push_back(r / s);
+    bs.push_back(b / s);
+    sums.push_back(s);
+  };
+  constexpr int kBand = 2, kStep = 2;
+  for (int k = 0; k < kBand; ++k) {
+    for (int x = 0; x < bgr8.cols; x += kStep) {
+      take(k, x);
+      take(bgr8.rows - 1 - k, x);
+    }
+    for (int y = 0; y < bgr8.rows; y += kStep) {
+      take(y, k);
+      take(y, bgr8.cols - 1 - k);
+    }
+  }
+  GarbageModel model;
+  const size_t border_samples =
+      static_cast<size_t>(kBand) * 2 * (bgr8.cols + bgr8.rows) / kStep;
+  // Fewer than 2 % of the border off the screen: nothing to model (an actor's feet, say).
+  if (rs.size() < std::max<size_t>(16, border_samples / 50)) return model;
+  auto quantile = [](std::vector<float> v, double f) {
+    const size_t k = std::min(v.size() - 1, static_cast<size_t>(f * v.size()));
+    std::nth_element(v.begin(), v.begin() + k, v.end());
+    return v[k];
+  };
+  model.r = quantile(rs, 0.5);
+  model.b = quantile(bs, 0.5);
+  // Spread of the surroundings' chroma (robust: 80th percentile of the distance to the median),
+  // 0.05 to 0.08: 8-bit quantisation of a dark neutral moves r, b by ~0.01, noise by more; the
+  // costume's dark blue trousers in shadow sit ~0.11 from the studio's grey.
+  std::vector<float> dist(rs.size());
+  for (size_t i = 0; i < rs.size(); ++i) {
+    dist[i] = std::max(std::abs(rs[i] - model.r), std::abs(bs[i] - model.b));
+  }
+  model.tolerance = std::clamp(1.5f * quantile(dist, 0.8), 0.05f, 0.08f);
+  // Brightest accepted: 1.5x the 95th percentile of the samples that match the chroma (the
+  // studio's floor is brighter than its drapes and may barely reach the border; the
+  // greenish-grey costume in shadow is ~3x the drapes' brightness).
+  std::vector<float> matching;
+  for (size_t i = 0; i < rs.size(); ++i) {
+    if (dist[i] <= model.tolerance) matching.push_back(sums[i]);
+  }
+  if (matching.size() < 16) return model;
+  model.max_sum = 1.5f * quantile(matching, 0.95);
+  model.valid = true;
+  return model;
+}
+
+struct ClassifyParams {
+  const ClassifyTables* tables = nullptr;
+  const ScreenModel* screen = nullptr;
+  bool use_plate = false;
+  bool use_garbage_model = false;
+  int plate_tolerance = 10;
+  const cv::Mat* memory = nullptr;  // garbage zone of earlier frames (no plate), or null
+};
+
+// 2: the surroundings' colour; 1: near it (twice the chroma tolerance, 1.5x the brightness: a
+// defocused edge of the actor over the surroundings, a noisy pixel), which must not be taken for
+// clear foreground; 0: neither.
+int garbageLikeness(const GarbageModel& gm, float r, float g, float b) {
+  const float s = r + g + b;
+  const float dr = std::abs(r - gm.r * s), db = std::abs(b - gm.b * s);
+  if (s <= gm.max_sum && dr <= gm.tolerance * s && db <= gm.tolerance * s) return 2;
+  if (s <= 1.5f * gm.max_sum && dr <= 2.0f * gm.tolerance * s && db <= 2.0f * gm.tolerance * s) return 1;
+  return 0;
+}
+
+// Screen test of one row, 16 pixels per step: kScreen where the chroma and the green's range say
+// screen, kUnknown elsewhere (decided by the scalar pass). range: per-pixel (min, max) green
+// (plate) or null (min = tables.min_green8, no max).
+void screenRow(const std::uint8_t* px, const std::uint8_t* range, const ClassifyTables& t, int W,
+               std::uint8_t* c) {
+  int x = 0;
+#if CV_SIMD128
+  const cv::v_uint16x8 vk = cv::v_setall_u16(static_cast<std::uint16_t>(t.screen_k));
+  const cv::v_uint16x8 vc = cv::v_setall_u16(static_cast<std::uint16_t>(t.screen_c));
+  const cv::v_uint8x16 vmin = cv::v_setall_u8(static_cast<std::uint8_t>(std::min(255, t.min_green8)));
+  const cv::v_uint8x16 screen = cv::v_setall_u8(kScreen), unknown = cv::v_setall_u8(kUnknown);
+  for (; x + 16 <= W; x += 16) {
+    cv::v_uint8x16 b, g, r;
+    cv::v_load_deinterleave(px + 3 * x, b, g, r);
+    const cv::v_uint8x16 m = cv::v_max(r, b);
+    cv::v_uint16x8 m0, m1, g0, g1;
+    cv::v_expand(m, m0, m1);
+    cv::v_expand(g, g0, g1);
+    const cv::v_uint16x8 ok0 = cv::v_add_wrap(cv::v_shl<7>(m0), vc) <= cv::v_mul_wrap(g0, vk);
+    const cv::v_uint16x8 ok1 = cv::v_add_wrap(cv::v_shl<7>(m1), vc) <= cv::v_mul_wrap(g1, vk);
+    cv::v_uint8x16 ok = cv::v_pack(ok0, ok1);
+    if (range != nullptr) {
+      cv::v_uint8x16 lo, hi;
+      cv::v_load_deinterleave(range + 2 * x, lo, hi);
+      ok = ok & (g >= lo) & (g <= hi);
+    } else {
+      ok = ok & (g >= vmin);
+    }
+    cv::v_store(c + x, cv::v_select(ok, screen, unknown));
+  }
+#endif
+  for (; x < W; ++x) {
+    const int b8 = px[3 * x], g8 = px[3 * x + 1], r8 = px[3 * x + 2];
+    const int lo = range != nullptr ? range[2 * x] : t.min_green8;
+    const int hi = range != nullptr ? range[2 * x + 1] : 255;
+    c[x] = t.screenChroma(std::max(r8, b8), g8) && g8 >= lo && g8 <= hi ? kScreen : kUnknown;
+  }
+}
+
+// First pass over rows [y0, y1): pixel classes. Garbage-like pixels remembered from earlier
+// frames are garbage at once; those touching the remembered zone seed the flood.
+void classifyRows(const cv::Mat& bgr8, const ClassifyParams& p, int y0, int y1, cv::Mat& cls,
+                  std::vector<cv::Point>& seeds) {
+  const auto& lut = srgbToLinear();
+  const ClassifyTables& t = *p.tables;
+  const ScreenModel& sm = *p.screen;
+  const int W = bgr8.cols, H = bgr8.rows;
+  for (int y = y0; y < y1; ++y) {
+    const std::uint8_t* px = bgr8.ptr<std::uint8_t>(y);
+    std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+    const std::uint8_t* range = p.use_plate ? sm.plate_green_range.ptr<std::uint8_t>(y) : nullptr;
+    const std::uint8_t* plate = p.use_plate ? sm.plate.ptr<std::uint8_t>(y) : nullptr;
+    const std::uint8_t* mem = p.memory != nullptr ? p.memory->ptr<std::uint8_t>(y) : nullptr;
+    const std::uint8_t* mem_up = p.memory != nullptr ? p.memory->ptr<std::uint8_t>(std::max(0, y - 1)) : nullptr;
+    const std::uint8_t* mem_down =
+        p.memory != nullptr ? p.memory->ptr<std::uint8_t>(std::min(H - 1, y + 1)) : nullptr;
+    screenRow(px, range, t, W, c);
+    for (int x = 0; x < W; ++x) {
+      if (x + 8 <= W && allBackground8(c + x)) {
+        x += 7;
+        continue;
+      }
+      if (c[x] == kScreen) continue;
+      const int b8 = px[3 * x], g8 = px[3 * x + 1], r8 = px[3 * x + 2];
+      if (range != nullptr && range[2 * x] > range[2 * x + 1]) {
+        // Garbage zone: difference against the plate.
+        const int d = std::max({std::abs(b8 - plate[3 * x]), std::abs(g8 - plate[3 * x + 1]),
+                                std::abs(r8 - plate[3 * x + 2])});
+        c[x] = d <= p.plate_tolerance ? kGarbage : d >= 2 * p.plate_tolerance ? kFg : kUnknown;
+        continue;
+      }
+      const int likeness = p.use_garbage_model ? garbageLikeness(sm.garbage, lut[r8], lut[g8], lut[b8]) : 0;
+      if (likeness == 1) {
+        c[x] = kUnknown;
+        continue;
+      }
+      if (likeness == 2) {
+        if (mem != nullptr && mem[x]) {
+          c[x] = kGarbage;
+        } else {
+          c[x] = kGarbageLike;
+          if (mem != nullptr && ((x > 0 && mem[x - 1]) || (x + 1 < W && mem[x + 1]) || mem_up[x] || mem_down[x])) {
+            seeds.emplace_back(x, y);
+          }
+        }
+        continue;
+      }
+      c[x] = std::max(r8, b8) >= t.fg_min_m[g8] ? kFg : kUnknown;
+    }
+  }
+}
+
+// The garbage zone (no plate): garbage-like pixels connected (8-neighbours, through garbage-like
+// pixels) to the image border or to the zone remembered from earlier frames are garbage; the
+// others stay foreground (dark neutral parts of the actor or prop, e.g. tag ink, separated from
+// the surroundings by the crate's white margin). The memory covers what a single frame cannot
+// tell: the surroundings showing through a gap enclosed by the actor (between the raised arm and
+// the head) are reached in frames where the actor stands elsewhere.
+// Scan-line flood fill: work proportional to the pixels it turns, one stack of row spans.
+void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
+  const int W = cls.cols, H = cls.rows;
+  auto seed = [&](int x, int y) {
+    if (cls.at<std::uint8_t>(y, x) == kGarbageLike) stack.emplace_back(x, y);
+  };
+  for (int x = 0; x < W; ++x) {
+    seed(x, 0);
+    seed(x, H - 1);
+  }
+  for (int y = 0; y < H; ++y) {
+    seed(0, y);
+    seed(W - 1, y);
+  }
+  while (!stack.empty()) {
+    const cv::Point s = stack.back();
+    stack.pop_back();
+    std::uint8_t* row = cls.ptr<std::uint8_t>(s.y);
+    if (row[s.x] != kGarbageLike) continue;
+    int left = s.x, right = s.x;
+    while (left > 0 && row[left - 1] == kGarbageLike) --left;
+    while (right + 1 < W && row[right + 1] == kGarbageLike) ++right;
+    std::memset(row + left, kGarbage, static_cast<size_t>(right - left + 1));
+    // Runs of the rows above and below touching [left - 1, right + 1] (8-connectivity): one
+    // seed per run.
+    const int x0 = std::max(0, left - 1), x1 = std::min(W - 1, right + 1);
+    for (int dy = -1; dy <= 1; dy += 2) {
+      const int y = s.y + dy;
+      if (y < 0 || y >= H) continue;
+      const std::uint8_t* next = cls.ptr<std::uint8_t>(y);
+      for (int x = x0; x <= x1; ++x) {
+        if (next[x] == kGarbageLike && (x == x0 || next[x - 1] != kGarbageLike)) stack.emplace_back(x, y);
+      }
+    }
+  }
+}
+
+struct Rgb {
+  float b = 0, g = 0, r = 0;
+};
+
+// Two-colour alpha of pixel (x, y) from its window: B = local background, F = the foreground
+// neighbour whose line to B passes closest to the pixel's colour (ties: the farthest from B,
+// i.e. the purest). Returns -1 when the window has no background (interior: alpha 1) and -2
+// when it has no foreground to mix with (alpha 0).
+float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, bool use_plate,
+                int x, int y, int radius) {
+  const auto& lut = srgbToLinear();
+  const int x0 = std::max(0, x - radius), x1 = std::min(bgr8.cols - 1, x + radius);
+  const int y0 = std::max(0, y - radius), y1 = std::min(bgr8.rows - 1, y + radius);
+  auto colour = [&](const cv::Mat& img, int xx, int yy) {
+    const std::uint8_t* p = img.ptr<std::uint8_t>(yy) + 3 * xx;
+    return Rgb{lut[p[0]], lut[p[1]], lut[p[2]]};
+  };
+  auto add = [](Rgb& sum, const Rgb& v) {
+    sum.b += v.b;
+    sum.g += v.g;
+    sum.r += v.r;
+  };
+  constexpr int kMaxCandidates = 49;  // (2 * 3 + 1)^2
+  Rgb sum_screen, sum_garbage, sum_plate;
+  int n_screen = 0, n_garbage = 0;
+  std::array<Rgb, kMaxCandidates> fg, unknown;
+  int n_fg = 0, n_unknown = 0;
+  for (int yy = y0; yy <= y1; ++yy) {
+    const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
+    for (int xx = x0; xx <= x1; ++xx) {
+      switch (c[xx]) {
+        case kScreen:
+        case kGarbage:
+          if (xx == x && yy == y) break;  // a background pixel being refined is not its own B
+          add(c[xx] == kScreen ? sum_screen : sum_garbage, colour(bgr8, xx, yy));
+          ++(c[xx] == kScreen ? n_screen : n_garbage);
+          if (use_plate) add(sum_plate, colour(sm.plate, xx, yy));
+          break;
+        case kUnknown: unknown[n_unknown++] = colour(bgr8, xx, yy); break;
+        default: fg[n_fg++] = colour(bgr8, xx, yy); break;
+      }
+    }
+  }
+  const int n_bg = n_screen + n_garbage;
+  if (n_bg == 0) return -1.0f;
+  const Rgb c = colour(bgr8, x, y);
+  Rgb bg;
+  if (use_plate) {
+    // The plate's own colour here, darkened by the neighbours' shadow factor.
+    const float shadow = (sum_screen.b + sum_screen.g + sum_screen.r + sum_garbage.b +
+                          sum_garbage.g + sum_garbage.r) /
+                         std::max(sum_plate.b + sum_plate.g + sum_plate.r, 1e-6f);
+    const Rgb here = colour(sm.plate, x, y);
+    bg = {here.b * shadow, here.g * shadow, here.r * shadow};
+  } else if (n_screen > 0 && n_garbage > 0) {
+    // On the screen's rim: the background is a mix of screen and surroundings. Take the point of
+    // the segment between their means nearest to the pixel; a pixel on that segment is rim.
+    const Rgb s{sum_screen.b / n_screen, sum_screen.g / n_screen, sum_screen.r / n_screen};
+    const Rgb g{sum_garbage.b / n_garbage, sum_garbage.g / n_garbage, sum_garbage.r / n_garbage};
+    const float db = g.b - s.b, dg = g.g - s.g, dr = g.r - s.r;
+    const float dd = std::max(db * db + dg * dg + dr * dr, 1e-12f);
+    const float t = std::clamp(((c.b - s.b) * db + (c.g - s.g) * dg + (c.r - s.r) * dr) / dd, 0.0f, 1.0f);
+    bg = {s.b + t * db, s.g + t * dg, s.r + t * dr};
+    const float eb = c.b - bg.b, eg = c.g - bg.g, er = c.r - bg.r;
+    if (eb * eb + eg * eg + er * er <= 0.01f * dd) return -2.0f;
+  } else {
+    const Rgb& sum = n_screen > 0 ? sum_screen : sum_garbage;
+    bg = {sum.b / n_bg, sum.g / n_bg, sum.r / n_bg};
+  }
+  // Candidates for F: the clear foreground, else the unknown (dark foreground in front of dark
+  // surroundings differs from the plate or the surroundings' colour by little; a thin structure
+  // has no pure pixel).
+  const Rgb* candidates = fg.data();
+  int n_candidates = n_fg;
+  float min_reach2 = 0.0f;
+  if (n_fg == 0) {
+    candidates = unknown.data();
+    n_candidates = n_unknown;
+    // An unknown neighbour counts only if it differs from B by more than noise does: 0.02 in
+    // linear light (about 10 sigma of 2-level sensor noise on the dark surroundings) or 30 % of
+    // B's own magnitude.
+    const float floor = std::max(0.02f, 0.3f * std::sqrt(bg.b * bg.b + bg.g * bg.g + bg.r * bg.r));
+    min_reach2 = floor * floor;
+  }
+  if (n_candidates == 0) return -2.0f;
+  const float cb = c.b - bg.b, cg = c.g - bg.g, cr = c.r - bg.r;
+  const float cc = cb * cb + cg * cg + cr * cr;
+  // Score every candidate: squared sine of the angle between C - B and F - B (0 = on the mixing
+  // line).
+  std::array<float, kMaxCandidates> sine2, reach, t;
+  float best_sine2 = 4.0f;
+  for (int i = 0; i < n_candidates; ++i) {
+    const Rgb& f = candidates[i];
+    const float db = f.b - bg.b, dg = f.g - bg.g, dr = f.r - bg.r;
+    const float dd = db * db + dg * dg + dr * dr;
+    reach[i] = dd;
+    if (dd < 1e-10f || dd < min_reach2) {
+      sine2[i] = 4.0f;
+      t[i] = 1.0f;
+      continue;
+    }
+    const float dot = cb * db + cg * dg + cr * dr;
+    t[i] = dot / dd;
+    sine2[i] = cc > 1e-12f ? std::max(0.0f, 1.0f - dot * dot / (dd * cc)) : 0.0f;
+    best_sine2 = std::min(best_sine2, sine2[i]);
+  }
+  // Among the candidates nearly as well aligned as the best (sine within 0.1), the farthest
+  // from B: a mixed neighbour lies on the same line but nearer, and would overstate alpha.
+  const float tolerance = std::sqrt(best_sine2) + 0.1f;
+  const float tolerance2 = tolerance * tolerance;
+  int pick = -1;
+  for (int i = 0; i < n_candidates; ++i) {
+    if (sine2[i] <= tolerance2 && (pick < 0 || reach[i] > reach[pick])) pick = i;
+  }
+  if (pick < 0 || sine2[pick] > 2.0f) return -2.0f;
+  return std::clamp(t[pick], 0.0f, 1.0f);
+}
+
+// One row of pass 2's bulk: alpha / silhouette 0 on background and 255 elsewhere, need = 1 at a
+// transition (unknown, or a 4-neighbour of another kind: background / unknown / foreground),
+// memory |= garbage.
+// Returns the row's garbage pixel count.
+int markTransitions(const std::uint8_t* c, const std::uint8_t* up, const std::uint8_t* down, int W,
+                    std::uint8_t* a, std::uint8_t* s, std::uint8_t* need, std::uint8_t* mem) {
+  auto kind = [&](const std::uint8_t* row, int x) {
+    return row[x] <= kGarbage ? 0 : row[x] == kUnknown ? 1 : 2;
+  };
+  auto scalar = [&](int x) {
+    const int k = kind(c, x);
+    a[x] = s[x] = k == 0 ? 0 : 255;
+    need[x] = k == 1 || kind(up, x) != k || kind(down, x) != k || (x > 0 && kind(c, x - 1) != k) ||
+              (x + 1 < W && kind(c, x + 1) != k);
+    if (mem != nullptr) mem[x] |= static_cast<std::uint8_t>(c[x] == kGarbage);
+    return c[x] == kGarbage ? 1 : 0;
+  };
+  int garbage = scalar(0);
+  int x = 1;
+#if CV_SIMD128
+  const cv::v_uint8x16 one = cv::v_setall_u8(kGarbage), unknown = cv::v_setall_u8(kUnknown);
+  const cv::v_uint8x16 ones = cv::v_setall_u8(1);
+  for (; x + 17 <= W; x += 16) {
+    const cv::v_uint8x16 vc = cv::v_load(c + x);
+    const cv::v_uint8x16 bg = vc <= one, fg = vc > unknown;
+    cv::v_uint8x16 t = vc == unknown;
+    for (const std::uint8_t* n : {up + x, down + x, c + x - 1, c + x + 1}) {
+      const cv::v_uint8x16 vn = cv::v_load(n);
+      t = t | (bg ^ (vn <= one)) | (fg ^ (vn > unknown));
+    }
+    cv::v_store(a + x, ~bg);
+    cv::v_store(s + x, ~bg);
+    cv::v_store(need + x, t & ones);
+    const cv::v_uint8x16 is_garbage = vc == one;
+    garbage += __builtin_popcount(static_cast<unsigned>(cv::v_signmask(is_garbage)));
+    if (mem != nullptr) cv::v_store(mem + x, cv::v_load(mem + x) | (is_garbage & ones));
+  }
+#endif
+  for (; x < W; ++x) garbage += scalar(x);
+  return garbage;
+}
+
+// Specks and holes by connected components of runs: each row of the silhouette is cut into
+// runs of foreground and of background, runs are joined to the touching runs of the row above
+// (foreground 8-connected, background 4-connected) with union-find, and the components' areas
+// decide. An actor's silhouette has a few runs per row, so this costs about one scan of the
+// image (most 8-byte words are all background and skipped) plus a few thousand unions, where
+// pixel labelling costs a label per pixel of the box around actor and prop.
+struct Run {
+  int y, x0, x1;  // [x0, x1) on row y
+  bool fg;
+};
+
+int findRoot(std::vector<int>& parent, int i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
+
+void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeyStats& stats) {
+  if (o.min_blob_px <= 1 && o.min_hole_px <= 1) return;
+  const int W = sil.cols, H = sil.rows;
+  std::vector<Run> runs;
+  std::vector<int> row_start(H + 1, 0);
+  for (int y = 0; y < H; ++y) {
+    row_start[y] = static_cast<int>(runs.size());
+    const std::uint8_t* s = sil.ptr<std::uint8_t>(y);
+    int x = 0;
+    while (x < W) {
+      const bool fg = s[x] != 0;
+      int end = x + 1;
+      // Skip whole 8-byte words of the same value.
+      const std::uint64_t same = fg ? ~0ull : 0ull;
+      while (end + 8 <= W) {
+        std::uint64_t word;
+        std::memcpy(&word, s + end, 8);
+        if (word != same) break;
+        end += 8;
+      }
+      while (end < W && (s[end] != 0) == fg) ++end;
+      runs.push_back({y, x, end, fg});
+      x = end;
+    }
+  }
+  row_start[H] = static_cast<int>(runs.size());
+  const int n = static_cast<int>(runs.size());
+  std::vector<int> parent(n);
+  for (int i = 0; i < n; ++i) parent[i] = i;
+  for (int y = 1; y < H; ++y) {
+    int first = row_start[y];  // first run of row y that may still touch a run above
+    for (int i = row_start[y - 1]; i < row_start[y]; ++i) {
+      const Run& a = runs[i];
+      while (first < row_start[y + 1] && runs[first].x1 + 1 <= a.x0) ++first;
+      for (int j = first; j < row_start[y + 1] && runs[j].x0 < a.x1 + 1; ++j) {
+        const Run& b = runs[j];
+        // Foreground touches diagonally too (8-connectivity), background only edge to edge.
+        const int slack = a.fg ? 1 : 0;
+        if (a.fg != b.fg || !(a.x0 < b.x1 + slack && b.x0 < a.x1 + slack)) continue;
+        const int ra = findRoot(parent, i), rb = findRoot(parent, j);
+        if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+      }
+    }
+  }
+  // Areas and contact with the image border per component.
+  std::vector<long long> area(n, 0);
+  std::vector<std::uint8_t> outside(n, 0);
+  for (int i = 0; i < n; ++i) {
+    const Run& r = runs[i];
+    const int root = findRoot(parent, i);
+    area[root] += r.x1 - r.x0;
+    if (r.y == 0 || r.y == H - 1 || r.x0 == 0 || r.x1 == W) outside[root] = 1;
+  }
+  std::vector<std::uint8_t> counted(n, 0);
+  for (int i = 0; i < n; ++i) {
+    const Run& r = runs[i];
+    const int root = findRoot(parent, i);
+    std::uint8_t value;
+    if (r.fg && area[root] < o.min_blob_px) {
+      value = 0;
+      if (!counted[root]) ++stats.specks_removed;
+    } else if (!r.fg && !outside[root] && area[root] < o.min_hole_px) {
+      value = 255;
+      if (!counted[root]) ++stats.holes_filled;
+    } else {
+      continue;
+    }
+    counted[root] = 1;
+    std::memset(sil.ptr<std::uint8_t>(r.y) + r.x0, value, static_cast<size_t>(r.x1 - r.x0));
+    std::memset(alpha8.ptr<std::uint8_t>(r.y) + r.x0, value, static_cast<size_t>(r.x1 - r.x0));
+  }
+}
+
+}  // namespace
+
+void KeyerOptions::validate() const {
+  auto bad = [](const std::string& field, const std::string& what) {
+    ErrorContext context;
+    context.field = field;
+    throw Error("keyer: " + field + " " + what, context);
+  };
+  if (!(silhouette_threshold > 0 && silhouette_threshold < 1)) {
+    bad("silhouette_threshold", "must be in (0, 1) (got " + str(silhouette_threshold) + ")");
+  }
+  if (min_blob_px < 0) bad("min_blob_px", "must be >= 0 (got " + str(min_blob_px) + ")");
+  if (min_hole_px < 0) bad("min_hole_px", "must be >= 0 (got " + str(min_hole_px) + ")");
+  if (edge_radius_px < 1 || edge_radius_px > 3) {
+    bad("edge_radius_px", "must be in [1, 3] (got " + str(edge_radius_px) + ")");
+  }
+  if (plate_tolerance < 1 || plate_tolerance > 80) {
+    bad("plate_tolerance", "must be in [1, 80] (got " + str(plate_tolerance) + ")");
+  }
+  if (threads < 0) bad("threads", "must be >= 0 (got " + str(threads) + ")");
+}
+
+Keyer::Keyer(const KeyerOptions& options) : options_(options) { options_.validate(); }
+
+void Keyer::setCleanPlate(const cv::Mat& bgr8, const std::string& source) {
+  checkImage(bgr8, source);
+  const auto& lut = srgbToLinear();
+  ScreenModel sm;
+  sm.from_clean_plate = true;
+  sm.plate = bgr8.clone();
+  if (!estimateKeyColour(bgr8, sm.key_color)) fail("no green screen found in the clean plate", source);
+  sm.key_q = chromaQ(sm.key_color[2], sm.key_color[1], sm.key_color[0]);
+  if (!(sm.key_q > 0.1f)) fail("screen colour is too unsaturated to key (q = " + str(sm.key_q) + ")", source);
+  const ClassifyTables tables = makeTables(sm);
+  // Screen pixels of the plate: its chroma within the screen band of the key. The rest, where
+  // connected to the border, is the garbage zone (keyed by difference against the plate).
+  sm.illumination.create(bgr8.size(), CV_32FC1);
+  cv::Mat not_screen(bgr8.size(), CV_8UC1);
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const std::uint8_t* p = bgr8.ptr<std::uint8_t>(y);
+    float* g = sm.illumination.ptr<float>(y);
+    std::uint8_t* n = not_screen.ptr<std::uint8_t>(y);
+    for (int x = 0; x < bgr8.cols; ++x) {
+      const int b8 = p[3 * x], g8 = p[3 * x + 1], r8 = p[3 * x + 2];
+      g[x] = lut[g8];
+      n[x] = tables.screenChroma(std::max(r8, b8), g8) && g8 >= tables.min_green8 ? 0 : 255;
+    }
+  }
+  sm.garbage_zone = cv::Mat::zeros(bgr8.size(), CV_8UC1);
+  if (options_.garbage_matte) {
+    cv::Mat labels;
+    const int n = cv::connectedComponents(not_screen, labels, 8, CV_32S);
+    std::vector<std::uint8_t> border(n, 0);
+    for (int x = 0; x < labels.cols; ++x) {
+      border[labels.at<int>(0, x)] = 1;
+      border[labels.at<int>(labels.rows - 1, x)] = 1;
+    }
+    for (int y = 0; y < labels.rows; ++y) {
+      border[labels.at<int>(y, 0)] = 1;
+      border[labels.at<int>(y, labels.cols - 1)] = 1;
+    }
+    for (int y = 0; y < labels.rows; ++y) {
+      const int* l = labels.ptr<int>(y);
+      const std::uint8_t* s = not_screen.ptr<std::uint8_t>(y);
+      std::uint8_t* z = sm.garbage_zone.ptr<std::uint8_t>(y);
+      for (int x = 0; x < labels.cols; ++x) z[x] = s[x] && border[l[x]] ? 255 : 0;
+    }
+    const int r = options_.edge_radius_px;
+    cv::dilate(sm.garbage_zone, sm.garbage_zone,
+               cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)));
+  }
+  // Per-pixel green range of the screen: from the deepest shadow to a slight brightening of
+  // the plate (uneven light and the cyclorama's falloff are in the plate).
+  sm.plate_green_range.create(bgr8.size(), CV_8UC2);
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const float* g = sm.illumination.ptr<float>(y);
+    const std::uint8_t* z = sm.garbage_zone.ptr<std::uint8_t>(y);
+    std::uint8_t* range = sm.plate_green_range.ptr<std::uint8_t>(y);
+    for (int x = 0; x < bgr8.cols; ++x) {
+      if (z[x]) {
+        range[2 * x] = 255;
+        range[2 * x + 1] = 0;
+      } else {
+        range[2 * x] = static_cast<std::uint8_t>(std::min(255, srgbCodeAtLeast(kMinPlateShadow * g[x])));
+        range[2 * x + 1] =
+            static_cast<std::uint8_t>(std::min(255, srgbCodeAtLeast(kMaxPlateBrightening * g[x])));
+      }
+    }
+  }
+  screen_ = std::move(sm);
+  has_screen_ = true;
+}
+
+KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
+  checkImage(bgr8, source);
+  if (has_screen_ && screen_.from_clean_plate && bgr8.size() != screen_.plate.size()) {
+    fail("frame is " + str(bgr8.cols) + "x" + str(bgr8.rows) + " but the clean plate is " +
+             str(screen_.plate.cols) + "x" + str(screen_.plate.rows),
+         source);
+  }
+  if (!has_screen_) {
+    ScreenModel sm;
+    if (!estimateKeyColour(bgr8, sm.key_color)) fail("no green screen found in the frame", source);
+    sm.key_q = chromaQ(sm.key_color[2], sm.key_color[1], sm.key_color[0]);
+    if (!(sm.key_q > 0.1f)) fail("screen colour is too unsaturated to key (q = " + str(sm.key_q) + ")", source);
+    screen_ = std::move(sm);
+    has_screen_ = true;
+  }
+  const int threads = threadCount(options_.threads);
+  const int W = bgr8.cols, H = bgr8.rows;
+  const bool use_plate = screen_.from_clean_plate;
+  const int bands = (H + kBandRows - 1) / kBandRows;
+  band_refined_.resize(bands);
+  band_seeds_.resize(bands);
+
+  const ClassifyTables tables = makeTables(screen_);
+  ClassifyParams params;
+  params.tables = &tables;
+  params.screen = &screen_;
+  params.use_plate = use_plate;
+  params.plate_tolerance = options_.plate_tolerance;
+  if (!use_plate && options_.garbage_matte) {
+    screen_.garbage = estimateGarbage(bgr8, tables);
+    params.use_garbage_model = screen_.garbage.valid;
+    if (params.use_garbage_model && options_.remember_garbage_zone) {
+      if (garbage_memory_.size() != bgr8.size()) garbage_memory_ = cv::Mat::zeros(bgr8.size(), CV_8UC1);
+      params.memory = &garbage_memory_;
+    }
+  }
+
+  // Pass 1: classes.
+  classes_.create(H, W, CV_8UC1);
+  cv::Mat& cls = classes_;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int band = 0; band < bands; ++band) {
+    band_seeds_[band].clear();
+    classifyRows(bgr8, params, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
+                 band_seeds_[band]);
+  }
+  if (params.use_garbage_model) {
+    std::vector<cv::Point>& stack = band_seeds_[0];
+    for (int band = 1; band < bands; ++band) {
+      stack.insert(stack.end(), band_seeds_[band].begin(), band_seeds_[band].end());
+    }
+    floodGarbage(cls, stack);
+  }
+
+  // Pass 2: alpha (8-bit). Background 0, foreground 255; the two-colour alpha for unknown
+  // pixels and for pixels with a 4-neighbour on the other side (a background pixel beside the
+  // foreground may hold a little of it: a dark costume's edge keeps the screen's chroma).
+  alpha8_.create(H, W, CV_8UC1);
+  need_rows_.create(bands, W, CV_8UC1);
+  KeyResult result;
+  result.silhouette.create(H, W, CV_8UC1);
+  const int radius = options_.edge_radius_px;
+  const int threshold8 = static_cast<int>(std::lround(options_.silhouette_threshold * 255.0));
+  cv::Mat* memory = params.memory != nullptr ? &garbage_memory_ : nullptr;
+  int unknown = 0, garbage = 0;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : unknown, garbage)
+  for (int band = 0; band < bands; ++band) {
+    std::vector<cv::Point>& refined = band_refined_[band];
+    refined.clear();
+    std::uint8_t* need_row = need_rows_.ptr<std::uint8_t>(band);
+    const int y1 = std::min(H, (band + 1) * kBandRows);
+    for (int y = band * kBandRows; y < y1; ++y) {
+      const std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+      const std::uint8_t* up = cls.ptr<std::uint8_t>(std::max(0, y - 1));
+      const std::uint8_t* down = cls.ptr<std::uint8_t>(std::min(H - 1, y + 1));
+      std::uint8_t* a = alpha8_.ptr<std::uint8_t>(y);
+      std::uint8_t* s = result.silhouette.ptr<std::uint8_t>(y);
+      // Alpha and silhouette from the class, and the pixels at a transition (unknown, or a
+      // 4-neighbour on the other side): 16 pixels per SIMD step.
+      std::uint8_t* need = need_row;
+      std::uint8_t* mem = memory != nullptr ? memory->ptr<std::uint8_t>(y) : nullptr;
+      garbage += markTransitions(c, up, down, W, a, s, need, mem);
+      for (int x = 0; x < W; ++x) {
+        if (x + 8 <= W) {
+          std::uint64_t word;
+          std::memcpy(&word, need + x, 8);
+          if (word == 0) {
+            x += 7;
+            continue;
+          }
+        }
+        if (!need[x]) continue;
+        ++unknown;
+        const float e = edgeAlpha(bgr8, cls, screen_, use_plate, x, y, radius);
+        if (e >= 0.0f) {
+          a[x] = static_cast<std::uint8_t>(std::lround(e * 255.0f));
+        } else if (e == -2.0f && c[x] == kUnknown) {
+          a[x] = 0;  // unknown with no foreground to mix with
+        }
+        s[x] = a[x] >= threshold8 ? 255 : 0;
+        refined.emplace_back(x, y);
+      }
+    }
+  }
+  // A refined pixel whose alpha is near one half is decided by the mean alpha of its 3 x 3
+  // neighbourhood: for a straight edge that mean is the fraction of the 3 x 3 square on the
+  // inside, which exceeds one half exactly when the pixel's centre is inside (the square is
+  // centrally symmetric). The pixel's own alpha cannot tell (a half-covered pixel looks the same
+  // whichever side its centre is on). Only across one edge (clear background and clear
+  // foreground in the window): a slit of screen between arm and torso has foreground on both
+  // sides and would be closed.
+  const int ambiguous8 = static_cast<int>(kAmbiguousAlpha * 255.0f);
+  const int clear8 = static_cast<int>(kClearAlpha * 255.0f);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int band = 0; band < bands; ++band) {
+    for (const cv::Point& p : band_refined_[band]) {
+      const int v = alpha8_.at<std::uint8_t>(p);
+      if (std::abs(v - threshold8) >= ambiguous8 || p.x == 0 || p.y == 0 || p.x + 1 == W ||
+          p.y + 1 == H) {
+        continue;
+      }
+      int sum = 0, lo = 255, hi = 0;
+      for (int dy = -1; dy <= 1; ++dy) {
+        const std::uint8_t* r = alpha8_.ptr<std::uint8_t>(p.y + dy);
+        for (int dx = -1; dx <= 1; ++dx) {
+          sum += r[p.x + dx];
+          lo = std::min<int>(lo, r[p.x + dx]);
+          hi = std::max<int>(hi, r[p.x + dx]);
+        }
+      }
+      if (lo <= clear8 && hi >= 255 - clear8) {
+        result.silhouette.at<std::uint8_t>(p) = sum >= 9 * threshold8 ? 255 : 0;
+      }
+    }
+  }
+  result.stats.unknown_px = unknown;
+  result.stats.garbage_px = garbage;
+  cleanSilhouette(result.silhouette, alpha8_, options_, result.stats);
+  if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
+  return result;
+}
+
+cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen,
+                const KeyerOptions& options) {
+  checkImage(bgr8, "despill");
+  if (key.alpha.size() != bgr8.size() || key.alpha.type() != CV_32FC1) {
+    fail("needs the key's soft alpha (CV_32FC1, the image's size; KeyerOptions::soft_alpha)",
+         "despill");
+  }
+  const bool use_plate = screen.from_clean_plate && screen.plate.size() == bgr8.size();
+  const auto& lut = srgbToLinear();
+  const int W = bgr8.cols, H = bgr8.rows, radius = options.edge_radius_px;
+  cv::Mat out(H, W, CV_8UC3);
+  const int threads = threadCount(options.threads);
+#pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
+  for (int y = 0; y < H; ++y) {
+    const std::uint8_t* in = bgr8.ptr<std::uint8_t>(y);
+    const float* a = key.alpha.ptr<float>(y);
+    std::uint8_t* o = out.ptr<std::uint8_t>(y);
+    for (int x = 0; x < W; ++x) {
+      const std::uint8_t* p = in + 3 * x;
+      std::uint8_t* q = o + 3 * x;
+      const float alpha = a[x];
+      if (alpha >= 1.0f) {
+        q[0] = p[0];
+        q[1] = p[1];
+        q[2] = p[2];
+        continue;
+      }
+      const float cb = lut[p[0]], cg = lut[p[1]], cr = lut[p[2]];
+      if (alpha <= 0.0f) {
+        q[0] = p[0];
+        q[1] = linearToSrgb8(std::min(cg, std::max(cr, cb)));
+        q[2] = p[2];
+        continue;
+      }
+      // Local screen colour: the alpha-0 neighbours (as the keyer's edge alpha).
+      float sb = 0, sg = 0, sr = 0, pb = 0, pg = 0, pr = 0;
+      int n = 0;
+      for (int yy = std::max(0, y - radius); yy <= std::min(H - 1, y + radius); ++yy) {
+        const float* aa = key.alpha.ptr<float>(yy);
+        const std::uint8_t* ii = bgr8.ptr<std::uint8_t>(yy);
+        const std::uint8_t* pp = use_plate ? screen.plate.ptr<std::uint8_t>(yy) : nullptr;
+        for (int xx = std::max(0, x - radius); xx <= std::min(W - 1, x + radius); ++xx) {
+          if (aa[xx] > 0.0f) continue;
+          sb += lut[ii[3 * xx]];
+          sg += lut[ii[3 * xx + 1]];
+          sr += lut[ii[3 * xx + 2]];
+          if (pp != nullptr) {
+            pb += lut[pp[3 * xx]];
+            pg += lut[pp[3 * xx + 1]];
+            pr += lut[pp[3 * xx + 2]];
+          }
+          ++n;
+        }
+      }
+      float bb, bgreen, br;
+      if (n == 0) {
+        // No screen in reach (a hole or a soft interior): the key colour at this brightness.
+        const float k = cg / std::max(screen.key_color[1], 1e-6f);
+        bb = screen.key_color[0] * k;
+        bgreen = screen.key_color[1] * k;
+        br = screen.key_color[2] * k;
+      } else if (use_plate) {
+        const std::uint8_t* pl = screen.plate.ptr<std::uint8_t>(y) + 3 * x;
+        const float shadow = (sb + sg + sr) / std::max(pb + pg + pr, 1e-6f);
+        bb = lut[pl[0]] * shadow;
+        bgreen = lut[pl[1]] * shadow;
+        br = lut[pl[2]] * shadow;
+      } else {
+        bb = sb / n;
+        bgreen = sg / n;
+        br = sr / n;
+      }
+      const float inv = 1.0f / alpha, rest = 1.0f - alpha;
+      q[0] = linearToSrgb8(std::max(0.0f, (cb - rest * bb) * inv));
+      q[1] = linearToSrgb8(std::max(0.0f, (cg - rest * bgreen) * inv));
+      q[2] = linearToSrgb8(std::max(0.0f, (cr - rest * br) * inv));
+    }
+  }
+  return out;
+}
+
+}  // namespace previz::carving

@@ -1,0 +1,476 @@
+// The per-frame carving job (see run.h).
+#include "carving/run.h"
+
+#include <omp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "core/mesh.h"
+
+namespace previz::carving {
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+ErrorContext fieldContext(const std::string& field) {
+  ErrorContext c;
+  c.field = field;
+  return c;
+}
+
+// Whole string to int, or nullopt.
+std::optional<int> toInt(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  size_t used = 0;
+  try {
+    const long v = std::stol(text, &used);
+    if (used != text.size() || v < std::numeric_limits<int>::min() ||
+        v > std::numeric_limits<int>::max())
+      return std::nullopt;
+    return static_cast<int>(v);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+std::string frameStem(int frame) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%06d", frame);
+  return name;
+}
+
+// Temporaries that an interrupted writer left beside an output (core/io.h names them
+// ".<file>.tmp.<pid>.…", pointcloud.cpp ".<file>.pcl.<pid>.…"): removed when their process is
+// gone, so a redone frame leaves a clean folder. A live writer's temporary is left alone.
+void removeLeftovers(const fs::path& output) {
+  std::error_code ec;
+  const fs::path dir = output.parent_path();
+  if (!fs::is_directory(dir, ec)) return;
+  const std::string name = output.filename().string();
+  for (const char* tag : {".tmp.", ".pcl."}) {
+    const std::string prefix = "." + name + tag;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      const std::string f = entry.path().filename().string();
+      if (f.compare(0, prefix.size(), prefix) != 0) continue;
+      const std::string rest = f.substr(prefix.size());
+      const std::optional<int> pid = toInt(rest.substr(0, rest.find('.')));
+      if (pid && (*pid == ::getpid() || fs::exists("/proc/" + std::to_string(*pid), ec))) continue;
+      fs::remove(entry.path(), ec);
+    }
+  }
+}
+
+// 8-bit preview: near = warm, far = cool (turbo colour map over the frame's depth range),
+// black where empty. For eyes only; the EXR holds the numbers.
+cv::Mat depthPreview(const cv::Mat& depth, double lo, double hi) {
+  cv::Mat t(depth.size(), CV_8UC1, cv::Scalar(0));
+  cv::Mat valid(depth.size(), CV_8UC1, cv::Scalar(0));
+  const double span = hi > lo ? hi - lo : 1.0;
+  for (int y = 0; y < depth.rows; ++y) {
+    const float* d = depth.ptr<float>(y);
+    uchar* o = t.ptr<uchar>(y);
+    uchar* v = valid.ptr<uchar>(y);
+    for (int x = 0; x < depth.cols; ++x) {
+      if (!std::isfinite(d[x])) continue;
+      o[x] = cv::saturate_cast<uchar>(40 + 215 * (hi - d[x]) / span);
+      v[x] = 255;
+    }
+  }
+  cv::Mat colour;
+  cv::applyColorMap(t, colour, cv::COLORMAP_TURBO);
+  cv::Mat preview(depth.size(), CV_8UC3, cv::Scalar::all(0));
+  colour.copyTo(preview, valid);
+  return preview;
+}
+
+// One frame's silhouettes, in the job's input-camera order.
+struct FrameInputs {
+  std::vector<cv::Mat> silhouettes;  // CV_8UC1 255/0; empty where dropped
+  std::vector<std::string> dropped;  // "" = used, else why
+};
+
+}  // namespace
+
+FrameRange parseFrameRange(const std::string& text) {
+  const auto bad = [&]() {
+    return Error("expected A:B (A inclusive, B exclusive), A:, :B or A with frame numbers >= 0 "
+                 "and A < B (got '" + text + "')",
+                 fieldContext("--frames"));
+  };
+  FrameRange range;
+  const size_t colon = text.find(':');
+  if (colon == std::string::npos) {
+    const auto a = toInt(text);
+    if (!a || *a < 0) throw bad();
+    range.first = *a;
+    range.end = *a + 1;
+    return range;
+  }
+  const std::string a = text.substr(0, colon), b = text.substr(colon + 1);
+  if (a.empty() && b.empty()) throw bad();
+  if (!a.empty()) {
+    const auto v = toInt(a);
+    if (!v || *v < 0) throw bad();
+    range.first = *v;
+  }
+  if (!b.empty()) {
+    const auto v = toInt(b);
+    if (!v || *v <= range.first) throw bad();
+    range.end = *v;
+  }
+  return range;
+}
+
+Shard parseShard(const std::string& text) {
+  const size_t slash = text.find('/');
+  if (slash != std::string::npos) {
+    const auto i = toInt(text.substr(0, slash)), n = toInt(text.substr(slash + 1));
+    if (i && n && *n >= 1 && *i >= 0 && *i < *n) return Shard{*i, *n};
+  }
+  throw Error("expected i/n with 0 <= i < n, e.g. 0/4 (got '" + text + "')",
+              fieldContext("--shard"));
+}
+
+void RunOptions::validate() const {
+  if (out.empty()) throw Error("carve: an output folder is required", fieldContext("--out"));
+  hull.validate();
+  keyer.validate();
+  points.validate();
+  if (shard.count < 1 || shard.index < 0 || shard.index >= shard.count)
+    throw Error("carve: shard index must be in [0, count) (got " + std::to_string(shard.index) +
+                    "/" + std::to_string(shard.count) + ")",
+                fieldContext("shard"));
+  if (frames.first < 0 || (frames.end >= 0 && frames.end <= frames.first))
+    throw Error("carve: frame range must have 0 <= first < end", fieldContext("frames"));
+}
+
+nlohmann::json FrameReport::toJson() const {
+  nlohmann::json dropped = nlohmann::json::array();
+  for (const DroppedCamera& d : cameras_dropped)
+    dropped.push_back({{"camera", d.camera}, {"frame", frame}, {"reason", d.reason}});
+  return {{"frame", frame},
+          {"cameras_used", cameras_used},
+          {"cameras_dropped", dropped},
+          {"depth_camera", depth_camera},
+          {"depth_silhouette", depth_silhouette},
+          {"cells", {{"surface", surface_cells}, {"inside", inside_cells}, {"tested", cells_tested}}},
+          {"volume_m3", volume_m3},
+          {"depth_pixels", depth_pixels},
+          {"depth_min_m", depth_min_m},
+          {"depth_max_m", depth_max_m},
+          {"mesh_vertices", mesh_vertices},
+          {"mesh_faces", mesh_faces},
+          {"points", points},
+          {"ms", {{"key", key_ms}, {"carve", carve_ms}, {"depth", depth_ms}, {"mesh", mesh_ms},
+                  {"export", export_ms}, {"total", total_ms}}}};
+}
+
+struct CarveJob::Impl {
+  const Take& take;
+  RunOptions options;
+  std::vector<std::string> carve_names;
+  std::string depth_name;
+  std::vector<std::string> input_names;  // carve cameras, then the depth camera if not among them
+  std::vector<Keyer> keyers;             // one per input camera, kept across frames
+  std::unique_ptr<Carver> carver;
+  nlohmann::json config;                 // what a finished frame's report must match
+
+  Impl(const Take& t, const RunOptions& o) : take(t), options(o) {}
+
+  fs::path path(const char* folder, int frame, const char* ext) const {
+    return options.out / folder / (frameStem(frame) + ext);
+  }
+
+  // Every input camera's silhouette (mask, or key of its plate), in parallel over cameras.
+  // Errors stay per camera: no exception crosses the OpenMP region (STYLE.md rule 11).
+  FrameInputs readSilhouettes(int frame) {
+    const int n = static_cast<int>(input_names.size());
+    FrameInputs in;
+    in.silhouettes.resize(n);
+    in.dropped.resize(n);
+    const int threads = options.hull.threads > 0 ? options.hull.threads : omp_get_max_threads();
+#pragma omp parallel for schedule(dynamic) num_threads(threads)
+    for (int i = 0; i < n; ++i) {
+      try {
+        const CameraFrame input = take.read(input_names[i], frame);
+        if (!input.ok()) {
+          in.dropped[i] = input.dropped;
+        } else if (take.hasMasks()) {
+          in.silhouettes[i] = input.mask;
+        } else {
+          const std::string source = take.framePath(input_names[i], frame).string();
+          in.silhouettes[i] = keyers[i].key(input.image, source).silhouette;
+        }
+      } catch (const std::exception& e) {
+        in.dropped[i] = std::string("keying failed: ") + e.what();
+      }
+      if (in.dropped[i].empty() && in.silhouettes[i].empty())
+        in.dropped[i] = "keying gave no silhouette";
+    }
+    return in;
+  }
+
+  // The hull from the carving cameras (the first carve_names.size() inputs).
+  VisualHull carve(int frame, const FrameInputs& in) {
+    Silhouettes sil;
+    for (size_t j = 0; j < carve_names.size(); ++j) {
+      sil.masks.push_back(in.dropped[j].empty() ? in.silhouettes[j] : cv::Mat());
+      sil.dropped.push_back(in.dropped[j]);
+    }
+    try {
+      return carver->carve(sil);
+    } catch (const Error& e) {
+      ErrorContext c = e.context();
+      c.frame = frame;
+      throw Error("carving failed: " + e.message(), c);
+    }
+  }
+
+  // Depth for the depth camera at its pose for this frame: EXR and preview.
+  void writeDepth(int frame, const VisualHull& hull, const FrameInputs& in, FrameReport& report) {
+    const size_t d = static_cast<size_t>(
+        std::find(input_names.begin(), input_names.end(), depth_name) - input_names.begin());
+    cv::Mat depth_sil;  // empty = every pixel
+    if (!options.depth_inside_silhouette) {
+      report.depth_silhouette = "none: depth wherever the ray meets the hull";
+    } else if (!in.dropped[d].empty()) {
+      report.depth_silhouette = "none: " + depth_name + " dropped (" + in.dropped[d] + ")";
+    } else {
+      depth_sil = in.silhouettes[d];
+      report.depth_silhouette = take.hasMasks() ? "mask" : "key";
+    }
+    const cv::Mat depth = carver->depth(hull, take.cameraAt(depth_name, frame), depth_sil);
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int y = 0; y < depth.rows; ++y) {
+      const float* p = depth.ptr<float>(y);
+      for (int x = 0; x < depth.cols; ++x) {
+        if (!std::isfinite(p[x])) continue;
+        ++report.depth_pixels;
+        lo = std::min<double>(lo, p[x]);
+        hi = std::max<double>(hi, p[x]);
+      }
+    }
+    if (report.depth_pixels > 0) {
+      report.depth_min_m = lo;
+      report.depth_max_m = hi;
+    }
+    writeDepthExr(path("depth", frame, ".exr"), depth,
+                  {{"previz:camera", depth_name}, {"previz:frame", std::to_string(frame)},
+                   {"previz:source", "visual hull (previz carve)"}});
+    writeImageAtomic(path("depth", frame, ".png"), depthPreview(depth, lo, hi));
+  }
+};
+
+CarveJob::CarveJob(const Take& take, const RunOptions& options)
+    : impl_(std::make_unique<Impl>(take, options)) {
+  Impl& m = *impl_;
+  m.options.validate();
+  const Rig& rig = take.rig();
+
+  if (m.options.carve_cameras.empty()) {
+    for (const RigCamera& rc : rig.cameras)
+      if (rc.role == "witness") m.carve_names.push_back(rc.camera.name);
+  } else {
+    for (const std::string& name : m.options.carve_cameras) {
+      rig.at(name);  // throws naming the camera
+      if (std::find(m.carve_names.begin(), m.carve_names.end(), name) == m.carve_names.end())
+        m.carve_names.push_back(name);
+    }
+  }
+  if (m.carve_names.size() < 2)
+    throw Error("carve: at least 2 carving cameras are needed (the rig has " +
+                    std::to_string(m.carve_names.size()) + " with role 'witness')",
+                fieldContext("carve_cameras"));
+
+  m.depth_name = m.options.depth_camera;
+  if (m.depth_name.empty()) {
+    for (const RigCamera& rc : rig.cameras)
+      if (rc.role == "main") m.depth_name = rc.camera.name;
+  } else {
+    rig.at(m.depth_name);
+  }
+
+  m.input_names = m.carve_names;
+  if (!m.depth_name.empty() &&
+      std::find(m.input_names.begin(), m.input_names.end(), m.depth_name) == m.input_names.end())
+    m.input_names.push_back(m.depth_name);
+
+  if (!take.hasMasks()) {
+    for (const std::string& name : m.input_names) {
+      m.keyers.emplace_back(m.options.keyer);
+      const cv::Mat clean = take.cleanPlate(name);
+      if (!clean.empty()) m.keyers.back().setCleanPlate(clean, take.cleanPlatePath(name).string());
+    }
+  }
+
+  std::vector<RigCamera> cameras;
+  for (const std::string& name : m.carve_names) cameras.push_back(rig.at(name));
+  m.carver = std::make_unique<Carver>(std::move(cameras), m.options.hull);
+
+  const HullOptions& h = m.options.hull;
+  m.config = {{"voxel_m", h.voxel_m},
+              {"k", h.k},
+              {"min_views", h.min_views},
+              {"volume", {h.volume.min().x(), h.volume.min().y(), h.volume.min().z(),
+                          h.volume.max().x(), h.volume.max().y(), h.volume.max().z()}},
+              {"carve_cameras", m.carve_names},
+              {"depth_camera", m.depth_name},
+              {"depth_inside_silhouette", m.options.depth_inside_silhouette},
+              {"silhouettes", take.hasMasks() ? "masks" : "keyer"},
+              {"main_poses", take.hasMainPoses()},
+              {"rig_format", take.rigFormat()},
+              {"points", {{"spacing_m", m.options.points.spacing_m},
+                          {"estimate_normals", m.options.points.estimate_normals}}}};
+}
+
+CarveJob::~CarveJob() = default;
+
+const RunOptions& CarveJob::options() const { return impl_->options; }
+const std::vector<std::string>& CarveJob::carveCameras() const { return impl_->carve_names; }
+const std::string& CarveJob::depthCamera() const { return impl_->depth_name; }
+
+std::vector<int> CarveJob::selectedFrames() const {
+  const RunOptions& o = impl_->options;
+  std::vector<int> in_range;
+  for (int f : impl_->take.frames())
+    if (o.frames.contains(f)) in_range.push_back(f);
+  std::vector<int> selected;
+  for (size_t i = 0; i < in_range.size(); ++i)
+    if (static_cast<int>(i % o.shard.count) == o.shard.index) selected.push_back(in_range[i]);
+  return selected;
+}
+
+fs::path CarveJob::reportPath(int frame) const { return impl_->path("report", frame, ".json"); }
+
+std::vector<fs::path> CarveJob::outputs(int frame) const {
+  const Impl& m = *impl_;
+  std::vector<fs::path> paths;
+  if (!m.depth_name.empty()) {
+    paths.push_back(m.path("depth", frame, ".exr"));
+    paths.push_back(m.path("depth", frame, ".png"));
+  }
+  paths.push_back(m.path("mesh", frame, ".ply"));
+  paths.push_back(m.path("mesh", frame, ".obj"));
+  paths.push_back(m.path("points", frame, ".ply"));
+  paths.push_back(m.path("points", frame, ".pcd"));
+  paths.push_back(reportPath(frame));
+  return paths;
+}
+
+bool CarveJob::finished(int frame) const {
+  std::error_code ec;
+  for (const fs::path& p : outputs(frame))
+    if (!fs::is_regular_file(p, ec) || fs::file_size(p, ec) == 0) return false;
+  try {
+    const nlohmann::json report = nlohmann::json::parse(readTextFile(reportPath(frame)));
+    return report.value("frame", -1) == frame && report.contains("config") &&
+           report["config"] == impl_->config;
+  } catch (const std::exception&) {
+    return false;  // unreadable report: redo the frame
+  }
+}
+
+FrameReport CarveJob::runFrame(int frame) {
+  Impl& m = *impl_;
+  const Clock::time_point t0 = Clock::now();
+  for (const fs::path& p : outputs(frame)) removeLeftovers(p);
+  FrameReport report;
+  report.frame = frame;
+  report.depth_camera = m.depth_name;
+
+  const FrameInputs in = m.readSilhouettes(frame);
+  report.key_ms = msSince(t0);
+  for (size_t i = 0; i < m.input_names.size(); ++i) {
+    if (in.dropped[i].empty()) {
+      report.cameras_used.push_back(m.input_names[i]);
+    } else {
+      report.cameras_dropped.push_back({m.input_names[i], in.dropped[i]});
+    }
+  }
+
+  const Clock::time_point t1 = Clock::now();
+  const VisualHull hull = m.carve(frame, in);
+  report.carve_ms = msSince(t1);
+  report.surface_cells = static_cast<long long>(hull.surface.size());
+  report.inside_cells = static_cast<long long>(hull.inside.size());
+  for (long long c : hull.stats.cells_tested) report.cells_tested += c;
+  const double v0 = hull.voxel_m * hull.voxel_m * hull.voxel_m;
+  for (const HullCell& c : hull.inside) report.volume_m3 += v0 * std::pow(8.0, c.level);
+  report.volume_m3 += 0.5 * v0 * static_cast<double>(hull.surface.size());
+
+  const Clock::time_point t2 = Clock::now();
+  if (!m.depth_name.empty()) m.writeDepth(frame, hull, in, report);
+  report.depth_ms = msSince(t2);
+
+  // Geometry for post.
+  const Clock::time_point t3 = Clock::now();
+  const TriangleMesh mesh = m.carver->mesh(hull);
+  report.mesh_ms = msSince(t3);
+  const Clock::time_point t4 = Clock::now();
+  writePly(mesh, m.path("mesh", frame, ".ply"));
+  writeObj(mesh, m.path("mesh", frame, ".obj"));
+  const SurfacePoints points = surfacePoints(mesh, m.options.points);
+  writePointCloudPly(points, m.path("points", frame, ".ply"));
+  writePointCloudPcd(points, m.path("points", frame, ".pcd"));
+  report.mesh_vertices = static_cast<long long>(mesh.vertices.size());
+  report.mesh_faces = static_cast<long long>(mesh.faces.size());
+  report.points = static_cast<long long>(points.size());
+  report.export_ms = msSince(t4);
+  report.total_ms = msSince(t0);
+
+  // The report last: its presence (with the same config) marks the frame finished.
+  nlohmann::json line = report.toJson();
+  line["config"] = m.config;
+  writeFileAtomic(reportPath(frame), line.dump() + "\n");
+  return report;
+}
+
+RunSummary CarveJob::run(const std::function<void(int, int)>& progress) {
+  const Clock::time_point t0 = Clock::now();
+  RunSummary summary;
+  summary.selected = selectedFrames();
+  std::vector<int> todo;
+  for (int f : summary.selected) (finished(f) ? summary.skipped : todo).push_back(f);
+  int done = 0;
+  for (int f : todo) {
+    try {
+      summary.carved.push_back(runFrame(f));
+    } catch (const std::exception& e) {
+      // A frame that cannot be carved is reported and left unfinished; the take goes on.
+      summary.failed.push_back({f, e.what()});
+    }
+    ++done;
+    if (progress) progress(done, static_cast<int>(todo.size()));
+  }
+
+  // carve.jsonl: every finished frame of the take (all shards), in frame order.
+  std::string lines;
+  for (int f : impl_->take.frames()) {
+    if (!finished(f)) continue;
+    try {
+      lines += nlohmann::json::parse(readTextFile(reportPath(f))).dump() + "\n";
+    } catch (const std::exception&) {
+    }
+  }
+  writeFileAtomic(impl_->options.out / "carve.jsonl", lines);
+  summary.ms = msSince(t0);
+  return summary;
+}
+
+}  // namespace previz::carving

@@ -1,0 +1,252 @@
+// Reading a take for carving (see take.h).
+#include "carving/take.h"
+
+#include <algorithm>
+#include <cctype>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/camera_io.h"
+#include "core/error.h"
+#include "core/io.h"
+
+namespace previz::carving {
+namespace fs = std::filesystem;
+
+namespace {
+
+ErrorContext context(const fs::path& file, const std::string& field = {}) {
+  ErrorContext c;
+  c.file = file.string();
+  c.field = field;
+  return c;
+}
+
+std::string frameName(int frame) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%06d.png", frame);
+  return name;
+}
+
+// Frame numbers of the %06d.png files in a folder (names that are all digits).
+void collectFrames(const fs::path& dir, std::set<int>& frames) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    const fs::path& p = entry.path();
+    const std::string stem = p.stem().string();
+    if (p.extension() != ".png" || stem.empty() || stem.size() > 9) continue;
+    if (!std::all_of(stem.begin(), stem.end(), [](unsigned char c) { return std::isdigit(c); }))
+      continue;
+    frames.insert(std::stoi(stem));
+  }
+}
+
+// Number of fields on the first camera row of a text rig (comments, blank lines and an
+// optional leading count line skipped).
+size_t rowFieldCount(const fs::path& path) {
+  std::istringstream in(readTextFile(path));
+  std::string line;
+  bool first = true;
+  while (std::getline(in, line)) {
+    const size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream fields(line);
+    std::vector<std::string> tok;
+    for (std::string t; fields >> t;) tok.push_back(t);
+    if (tok.empty()) continue;
+    if (first && tok.size() == 1) {  // the camera count line of Middlebury's files
+      first = false;
+      continue;
+    }
+    return tok.size();
+  }
+  return 0;
+}
+
+std::map<int, Pose> readMainPoses(const fs::path& path) {
+  std::map<int, Pose> poses;
+  std::istringstream in(readTextFile(path));
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    try {
+      const nlohmann::json j = nlohmann::json::parse(line);
+      poses[j.at("frame").get<int>()] = poseFromJson(j.at("T_world_cam"), "T_world_cam");
+    } catch (const Error& e) {
+      throw Error("line " + std::to_string(line_no) + ": " + e.message(),
+                  context(path, e.context().field));
+    } catch (const std::exception& e) {
+      throw Error("line " + std::to_string(line_no) + ": expected {\"frame\", \"T_world_cam\"}: " +
+                      e.what(),
+                  context(path, "frame"));
+    }
+  }
+  return poses;
+}
+
+}  // namespace
+
+Take::Take(const TakeSource& source) : source_(source) {
+  std::error_code ec;
+  if (source_.take_dir.empty() || !fs::is_directory(source_.take_dir, ec))
+    throw Error("take folder not found", context(source_.take_dir, "--take"));
+  if (source_.rig_path.empty()) throw Error("no rig file given", context({}, "--rig"));
+  if (!fs::is_regular_file(source_.rig_path, ec))
+    throw Error("rig file not found", context(source_.rig_path, "--rig"));
+  if (!source_.masks_dir.empty() && !fs::is_directory(source_.masks_dir, ec))
+    throw Error("masks folder not found", context(source_.masks_dir, "--masks"));
+
+  if (source_.rig_path.extension() == ".json") {
+    rig_ = readRig(source_.rig_path);
+    rig_format_ = "rig.json";
+  } else {
+    // The rows carry no size; it does not enter the decomposition, so read with a placeholder
+    // and give each camera the size of its own images below.
+    const size_t fields = rowFieldCount(source_.rig_path);
+    if (fields == 13) {
+      rig_ = readProjectionRows(source_.rig_path, 1, 1);
+      rig_format_ = "projection rows";
+    } else if (fields == 22) {
+      rig_ = readKRtRows(source_.rig_path, 1, 1);
+      rig_format_ = "K R t rows";
+    } else {
+      throw Error("not a rig: expected rig.json, or rows of 13 fields (name p11..p34) or 22 "
+                  "fields (name K R t); the first row has " + std::to_string(fields),
+                  context(source_.rig_path, "row"));
+    }
+  }
+  if (rig_.cameras.empty()) throw Error("the rig has no cameras", context(source_.rig_path));
+
+  std::set<int> frames;
+  for (const RigCamera& rc : rig_.cameras) {
+    collectFrames(source_.take_dir / "cams" / rc.camera.name, frames);
+    if (hasMasks()) collectFrames(source_.masks_dir / rc.camera.name, frames);
+  }
+  const fs::path take_json = source_.take_dir / "take.json";
+  if (fs::is_regular_file(take_json, ec)) {
+    const nlohmann::json j = readJsonFile(take_json);
+    if (j.contains("frames") && j["frames"].is_number_integer())
+      for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(f);
+  }
+  frames_.assign(frames.begin(), frames.end());
+  if (frames_.empty())
+    throw Error("no frames: expected cams/<camera>/%06d.png for the rig's cameras (" +
+                    std::to_string(rig_.cameras.size()) + " cameras, first '" +
+                    rig_.cameras.front().camera.name + "')" +
+                    (hasMasks() ? " or <masks>/<camera>/%06d.png" : ""),
+                context(source_.take_dir, "--take"));
+
+  if (rig_format_ != "rig.json") {
+    for (RigCamera& rc : rig_.cameras) {
+      const std::string& name = rc.camera.name;
+      cv::Mat first;
+      for (int f : frames_) {
+        for (const fs::path& p : {framePath(name, f), hasMasks() ? maskPath(name, f) : fs::path()}) {
+          if (p.empty() || !fs::is_regular_file(p, ec)) continue;
+          first = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+          if (!first.empty()) break;
+        }
+        if (!first.empty()) break;
+      }
+      if (first.empty()) {
+        ErrorContext c = context(source_.rig_path, "width/height");
+        c.camera = name;
+        throw Error("no readable frame of this camera in the take gives its image size", c);
+      }
+      rc.camera.width = first.cols;
+      rc.camera.height = first.rows;
+    }
+  }
+
+  for (const RigCamera& rc : rig_.cameras)
+    if (rc.role == "main") main_name_ = rc.camera.name;
+  if (!source_.main_poses.empty()) {
+    if (main_name_.empty())
+      throw Error("main camera poses given but the rig has no camera with role 'main'",
+                  context(source_.main_poses, "--main-poses"));
+    if (!fs::is_regular_file(source_.main_poses, ec))
+      throw Error("main camera poses file not found", context(source_.main_poses, "--main-poses"));
+    main_poses_ = readMainPoses(source_.main_poses);
+  }
+}
+
+fs::path Take::framePath(const std::string& camera, int frame) const {
+  return source_.take_dir / "cams" / camera / frameName(frame);
+}
+
+fs::path Take::maskPath(const std::string& camera, int frame) const {
+  return source_.masks_dir / camera / frameName(frame);
+}
+
+fs::path Take::cleanPlatePath(const std::string& camera) const {
+  return source_.take_dir / "clean" / (camera + ".png");
+}
+
+cv::Mat Take::cleanPlate(const std::string& camera) const {
+  const fs::path path = cleanPlatePath(camera);
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return {};
+  cv::Mat plate = readImage(path, cv::IMREAD_COLOR);
+  const RigCamera& rc = rig_.at(camera);
+  if (plate.cols != rc.camera.width || plate.rows != rc.camera.height) {
+    ErrorContext c = context(path);
+    c.camera = camera;
+    throw Error("clean plate is " + std::to_string(plate.cols) + "x" + std::to_string(plate.rows) +
+                    ", the camera " + std::to_string(rc.camera.width) + "x" +
+                    std::to_string(rc.camera.height),
+                c);
+  }
+  return plate;
+}
+
+CameraFrame Take::read(const std::string& camera, int frame) const {
+  const RigCamera& rc = rig_.at(camera);
+  CameraFrame out;
+  out.camera = camera;
+  out.frame = frame;
+  const fs::path path = hasMasks() ? maskPath(camera, frame) : framePath(camera, frame);
+  const char* what = hasMasks() ? "mask" : "frame";
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) {
+    out.dropped = std::string("missing ") + what + " " + path.string();
+    return out;
+  }
+  cv::Mat image;
+  try {
+    image = readImage(path, hasMasks() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
+  } catch (const Error& e) {
+    out.dropped = std::string("unreadable ") + what + " (corrupt or truncated?): " + e.what();
+    return out;
+  }
+  if (image.cols != rc.camera.width || image.rows != rc.camera.height) {
+    out.dropped = std::string(what) + " is " + std::to_string(image.cols) + "x" +
+                  std::to_string(image.rows) + ", the rig says " + std::to_string(rc.camera.width) +
+                  "x" + std::to_string(rc.camera.height) + ": " + path.string();
+    return out;
+  }
+  if (hasMasks()) {
+    cv::threshold(image, out.mask, 127, 255, cv::THRESH_BINARY);
+  } else {
+    out.image = image;
+  }
+  return out;
+}
+
+RigCamera Take::cameraAt(const std::string& camera, int frame) const {
+  RigCamera rc = rig_.at(camera);
+  if (camera == main_name_) {
+    const auto it = main_poses_.find(frame);
+    if (it != main_poses_.end()) rc.T_world_cam = it->second;
+  }
+  return rc;
+}
+
+}  // namespace previz::carving

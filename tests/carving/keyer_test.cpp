@@ -1,0 +1,397 @@
+// The keyer against the synthetic studio's exact truth, at the real witness size (1280 x 720, the
+// take's default 4 samples per pixel): silhouettes vs the true labels of every witness camera on
+// three frames across the choreography, with and without a clean plate; the greenish-grey
+// costume kept; the floor shadows dropped; spill removed from the main plate's edges; and the
+// cleaning, the options and the errors on small images made by hand.
+#include "carving/keyer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+#include "datasets/render.h"
+#include "datasets/rigs.h"
+#include "datasets/scene.h"
+#include "datasets/studio.h"
+
+namespace previz::carving {
+namespace {
+
+using synth::ObjectClass;
+
+// Frames across the choreography (10 s take): walking behind the pillar's place, both arms up,
+// turning on the spot. Keyed in this order with one Keyer per camera, as a take is.
+const double kTimes[] = {2.5, 5.5, 6.2};
+
+double srgbToLinear(int code) {
+  static const std::vector<double> table = [] {
+    std::vector<double> t(256);
+    for (int i = 0; i < 256; ++i) t[static_cast<size_t>(i)] = synth::srgbDecode(i / 255.0);
+    return t;
+  }();
+  return table[static_cast<size_t>(code)];
+}
+
+struct Studio {
+  synth::StudioConfig config;
+  synth::Studio studio{config};
+  Rig rig = synth::studioRig(synth::StudioRigOptions{}, config.take_duration_s, true);
+
+  // What the take's camera 'index' films at time t (layers: scene.h), as synthesizeTake renders
+  // it: 4 samples per pixel, no noise, no blur, unit gain.
+  synth::RenderedView render(int index, double time_s, unsigned layers, bool truth = true) const {
+    const RigCamera& c = rig.cameras[static_cast<size_t>(index)];
+    const Pose T_world_cam = c.role == "main"
+                                 ? synth::mainCameraPose(time_s, config.take_duration_s, true)
+                                 : c.T_world_cam;
+    const synth::Scene scene = studio.sceneAt(time_s, layers);
+    synth::RenderOptions options;
+    options.camera_index = index;
+    options.truth = truth;
+    return synth::renderView(c.camera, T_world_cam, scene, options);
+  }
+  int mainIndex() const {
+    for (size_t i = 0; i < rig.cameras.size(); ++i) {
+      if (rig.cameras[i].role == "main") return static_cast<int>(i);
+    }
+    return -1;
+  }
+};
+
+// What the keyer must find: actor and prop (the crate is foreground to a keyer; truth/masks
+// holds the actor only, so the labels are the reference).
+cv::Mat foregroundTruth(const cv::Mat& labels) {
+  return (labels == static_cast<int>(ObjectClass::kActor)) |
+         (labels == static_cast<int>(ObjectClass::kProp));
+}
+
+double iou(const cv::Mat& a, const cv::Mat& b) {
+  const double inter = cv::countNonZero(a & b), uni = cv::countNonZero(a | b);
+  return uni > 0 ? inter / uni : 1.0;
+}
+
+// The greenish-grey costume: actor pixels whose own colour is green-dominant in linear light
+// (skin, shirt, trousers, shoes and hair are not), away from the silhouette's edge (eroded
+// mask), where the pixel is the shaded costume itself.
+cv::Mat costumePixels(const cv::Mat& bgr, const cv::Mat& labels) {
+  cv::Mat actor = labels == static_cast<int>(ObjectClass::kActor), inner;
+  cv::erode(actor, inner, cv::Mat(), cv::Point(-1, -1), 2);
+  cv::Mat costume = cv::Mat::zeros(bgr.size(), CV_8UC1);
+  for (int y = 0; y < bgr.rows; ++y) {
+    for (int x = 0; x < bgr.cols; ++x) {
+      const cv::Vec3b p = bgr.at<cv::Vec3b>(y, x);
+      if (inner.at<std::uint8_t>(y, x) &&
+          srgbToLinear(p[1]) > std::max(srgbToLinear(p[0]), srgbToLinear(p[2]))) {
+        costume.at<std::uint8_t>(y, x) = 255;
+      }
+    }
+  }
+  return costume;
+}
+
+// Floor shadows: stage pixels at least 15 % darker in green than the clean plate, more than
+// 2 px from the actor and prop (so the silhouette's own anti-aliased edge does not count).
+cv::Mat shadowPixels(const cv::Mat& bgr, const cv::Mat& clean, const cv::Mat& labels) {
+  cv::Mat near_fg;
+  cv::dilate(foregroundTruth(labels), near_fg, cv::Mat(), cv::Point(-1, -1), 2);
+  cv::Mat shadow = cv::Mat::zeros(bgr.size(), CV_8UC1);
+  for (int y = 0; y < bgr.rows; ++y) {
+    for (int x = 0; x < bgr.cols; ++x) {
+      if (labels.at<std::uint8_t>(y, x) != static_cast<int>(ObjectClass::kStage) ||
+          near_fg.at<std::uint8_t>(y, x)) {
+        continue;
+      }
+      if (srgbToLinear(bgr.at<cv::Vec3b>(y, x)[1]) < 0.85 * srgbToLinear(clean.at<cv::Vec3b>(y, x)[1])) {
+        shadow.at<std::uint8_t>(y, x) = 255;
+      }
+    }
+  }
+  return shadow;
+}
+
+// One test renders every witness on the three frames (plus one clean plate per camera) and checks
+// all the silhouette properties on them: rendering dominates the cost, so it is done once.
+TEST(KeyerStudio, WitnessSilhouettesMatchTruthWithAndWithoutCleanPlate) {
+  const Studio s;
+  struct Frame {
+    cv::Mat bgr, labels;
+  };
+  std::vector<double> ious[2];
+  long long costume_total = 0, costume_kept[2] = {0, 0};
+  long long shadow_total = 0, shadow_in[2] = {0, 0};
+  std::printf("camera     t     IoU(frame) IoU(plate)  costume px  shadow px in sil (frame/plate)\n");
+  for (int cam = 0; cam < static_cast<int>(s.rig.cameras.size()); ++cam) {
+    if (s.rig.cameras[static_cast<size_t>(cam)].role != "witness") continue;
+    const std::string name = s.rig.cameras[static_cast<size_t>(cam)].camera.name;
+    const cv::Mat clean = s.render(cam, kTimes[0], synth::kLayerStage, false).bgr;
+    Keyer from_frame, from_plate;
+    from_plate.setCleanPlate(clean, name + " clean plate");
+    for (double t : kTimes) {
+      const synth::RenderedView view = s.render(cam, t, synth::kLayersPlate);
+      const cv::Mat truth = foregroundTruth(view.labels);
+      const cv::Mat costume = costumePixels(view.bgr, view.labels);
+      const cv::Mat shadow = shadowPixels(view.bgr, clean, view.labels);
+      const std::string source = name + " t=" + std::to_string(t);
+      const KeyResult keys[2] = {from_frame.key(view.bgr, source), from_plate.key(view.bgr, source)};
+      costume_total += cv::countNonZero(costume);
+      shadow_total += cv::countNonZero(shadow);
+      int costume_in[2], shadows_in[2];
+      for (int mode = 0; mode < 2; ++mode) {
+        ASSERT_EQ(keys[mode].silhouette.type(), CV_8UC1);
+        ASSERT_EQ(keys[mode].alpha.type(), CV_32FC1);
+        const double v = iou(keys[mode].silhouette, truth);
+        ious[mode].push_back(v);
+        EXPECT_GE(v, 0.99) << source << (mode ? " with" : " without") << " clean plate";
+        costume_in[mode] = cv::countNonZero(costume & keys[mode].silhouette);
+        shadows_in[mode] = cv::countNonZero(shadow & keys[mode].silhouette);
+        costume_kept[mode] += costume_in[mode];
+        shadow_in[mode] += shadows_in[mode];
+      }
+      std::printf("%-10s %.1f  %.4f     %.4f      %5d/%-5d  %d/%d of %d\n", name.c_str(), t,
+                  ious[0].back(), ious[1].back(), costume_in[0], cv::countNonZero(costume),
+                  shadows_in[0], shadows_in[1], cv::countNonZero(shadow));
+    }
+  }
+  ASSERT_EQ(ious[0].size(), 24u);
+  for (int mode = 0; mode < 2; ++mode) {
+    std::vector<double> v = ious[mode];
+    std::sort(v.begin(), v.end());
+    std::printf("IoU %s clean plate: min %.4f median %.4f\n", mode ? "with" : "without", v.front(),
+                v[v.size() / 2]);
+    // The costume (greenish grey, 25 % of the screen's chroma) is foreground: every pixel kept.
+    ASSERT_GT(costume_total, 10000);
+    EXPECT_GE(static_cast<double>(costume_kept[mode]) / costume_total, 0.999);
+    // Shadows on the floor (down to ~45 % of the lit screen) are screen.
+    ASSERT_GT(shadow_total, 20000);
+    EXPECT_LE(static_cast<double>(shadow_in[mode]) / shadow_total, 0.001);
+    std::printf("  costume recall %.5f, floor-shadow pixels inside the silhouette %.5f\n",
+                static_cast<double>(costume_kept[mode]) / costume_total,
+                static_cast<double>(shadow_in[mode]) / shadow_total);
+  }
+}
+
+// Main plate: on the silhouette's edge (0.1 < alpha < 0.9) the raw pixel is a mix with the screen
+// (green above red and blue); despilled, it is the foreground's own colour. The truth is the same
+// frame rendered without the stage: C = alpha F + (1 - alpha) E with E the dark environment.
+TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
+  const Studio s;
+  const int main = s.mainIndex();
+  ASSERT_GE(main, 0);
+  const double t = 8.5;  // walking along the front: the main camera sees the costume from the side
+  const synth::RenderedView plate = s.render(main, t, synth::kLayersPlate);
+  const cv::Mat alone = s.render(main, t, synth::kLayerActor | synth::kLayerProp, false).bgr;
+  const double environment = synth::Scene{}.environment_rgb.x();  // grey, all channels alike
+  Keyer keyer;
+  const KeyResult key = keyer.key(plate.bgr, "main");
+  EXPECT_GE(iou(key.silhouette, foregroundTruth(plate.labels)), 0.98);
+  const cv::Mat out = despill(plate.bgr, key, keyer.screen());
+  ASSERT_EQ(out.type(), CV_8UC3);
+  ASSERT_EQ(out.size(), plate.bgr.size());
+
+  long long edge = 0, green_before = 0, green_after = 0, greenish = 0, greenish_kept = 0;
+  double greenish_err_before = 0, greenish_err_after = 0;
+  long long opaque = 0, opaque_changed = 0;
+  double err_before = 0, err_after = 0;
+  for (int y = 0; y < out.rows; ++y) {
+    for (int x = 0; x < out.cols; ++x) {
+      const float a = key.alpha.at<float>(y, x);
+      const cv::Vec3b c = plate.bgr.at<cv::Vec3b>(y, x), o = out.at<cv::Vec3b>(y, x);
+      if (a >= 1.0f) {
+        ++opaque;
+        opaque_changed += c != o;
+        continue;
+      }
+      if (a < 0.1f || a > 0.9f) continue;
+      double f[3], raw[3], after[3];
+      for (int ch = 0; ch < 3; ++ch) {
+        f[ch] = (srgbToLinear(alone.at<cv::Vec3b>(y, x)[ch]) - (1.0 - a) * environment) / a;
+        raw[ch] = srgbToLinear(c[ch]);
+        after[ch] = srgbToLinear(o[ch]);
+      }
+      auto excess = [](const double* v) { return v[1] - std::max(v[0], v[2]); };
+      if (excess(f) > 0) {
+        // The greenish costume's own edge: its green is not spill, and stays.
+        ++greenish;
+        greenish_kept += excess(after) > 0;
+        for (int ch = 0; ch < 3; ++ch) {
+          greenish_err_before += std::abs(raw[ch] - f[ch]) / 3;
+          greenish_err_after += std::abs(after[ch] - f[ch]) / 3;
+        }
+        continue;
+      }
+      ++edge;
+      green_before += excess(raw) > 0.01;
+      green_after += excess(after) > 0.01;
+      for (int ch = 0; ch < 3; ++ch) {
+        err_before += std::abs(raw[ch] - f[ch]) / 3;
+        err_after += std::abs(after[ch] - f[ch]) / 3;
+      }
+    }
+  }
+  std::printf("main t=%.1f: %lld edge px; G > max(R, B) + 0.01: %lld before, %lld after; "
+              "mean |F - F_true| (linear) %.4f before, %.4f after; costume edge px: %lld keep "
+              "green above red and blue of %lld, mean |F - F_true| %.4f before, %.4f after; "
+              "opaque px changed %lld/%lld\n",
+              t, edge, green_before, green_after, err_before / edge, err_after / edge,
+              greenish_kept, greenish, greenish_err_before / std::max(1LL, greenish),
+              greenish_err_after / std::max(1LL, greenish), opaque_changed, opaque);
+  ASSERT_GT(edge, 1000);
+  EXPECT_GT(green_before, edge / 2);            // the raw edges carry the screen
+  EXPECT_LE(green_after, edge / 100);           // despilled: green no longer above red and blue
+  EXPECT_LT(err_after / edge, 0.02);            // and the colour is the foreground's
+  EXPECT_LT(err_after, 0.25 * err_before);
+  EXPECT_EQ(opaque_changed, 0);                 // what is opaque is left as it is
+  ASSERT_GT(opaque, 10000);
+  ASSERT_GT(greenish, 20);
+  EXPECT_GE(greenish_kept, greenish * 3 / 4);  // the costume's own green is not spill
+  EXPECT_LT(greenish_err_after, 0.5 * greenish_err_before);
+}
+
+// A hand-made frame: the screen colour with a shadowed band, a thin limb (2 px), a speck, a
+// hole, a dark neutral tag-like patch inside a white box and a greenish-grey patch.
+TEST(Keyer, CleansSpecksAndHolesButKeepsThinLimbs) {
+  const cv::Vec3b screen(99, 183, 81), shadowed(66, 124, 53), costume(129, 143, 126);
+  cv::Mat img(240, 320, CV_8UC3, screen);
+  img(cv::Rect(0, 180, 320, 30)).setTo(shadowed);              // floor shadow
+  img(cv::Rect(40, 40, 60, 120)).setTo(cv::Vec3b(60, 70, 170));  // torso
+  img(cv::Rect(100, 60, 120, 2)).setTo(cv::Vec3b(60, 70, 170));  // thin limb, 2 px
+  img(cv::Rect(60, 80, 5, 5)).setTo(screen);                     // hole, 25 px
+  img(cv::Rect(260, 30, 4, 4)).setTo(cv::Vec3b(60, 70, 170));    // speck, 16 px
+  img(cv::Rect(150, 120, 40, 40)).setTo(cv::Vec3b(200, 200, 200));  // white box
+  img(cv::Rect(160, 130, 20, 20)).setTo(cv::Vec3b(10, 10, 10));     // dark patch in it
+  img(cv::Rect(230, 120, 30, 40)).setTo(costume);
+  Keyer keyer;
+  const KeyResult r = keyer.key(img, "hand-made");
+  auto at = [&](int x, int y) { return r.silhouette.at<std::uint8_t>(y, x); };
+  EXPECT_EQ(at(70, 100), 255);   // torso
+  EXPECT_EQ(at(62, 82), 255);    // hole filled
+  EXPECT_EQ(at(200, 60), 255);   // limb kept, full width
+  EXPECT_EQ(at(200, 61), 255);
+  EXPECT_EQ(at(200, 59), 0);
+  EXPECT_EQ(at(200, 62), 0);
+  EXPECT_EQ(at(261, 31), 0);     // speck removed
+  EXPECT_EQ(at(170, 140), 255);  // dark patch inside the box: foreground (no surroundings here)
+  EXPECT_EQ(at(245, 140), 255);  // greenish grey
+  EXPECT_EQ(at(20, 195), 0);     // shadowed screen
+  EXPECT_EQ(at(20, 20), 0);
+  EXPECT_EQ(r.stats.specks_removed, 1);
+  EXPECT_EQ(r.stats.holes_filled, 1);
+  // Nothing but the hand-made objects: area within the rounding of their edges.
+  const int expected = 60 * 120 + 120 * 2 + 40 * 40 + 30 * 40;
+  EXPECT_NEAR(cv::countNonZero(r.silhouette), expected, 4);
+}
+
+// The surroundings beyond the screen (a dark grey band along the top border, as a witness sees
+// the studio over the cyclorama) are background; the actor standing in front of them is not, and
+// neither is a dark grey patch of the actor's own away from them.
+TEST(Keyer, GarbageMatteDropsSurroundingsConnectedToTheBorderOnly) {
+  const cv::Vec3b screen(99, 183, 81), studio(52, 50, 50), skin(120, 150, 200);
+  cv::Mat img(240, 320, CV_8UC3, screen);
+  img(cv::Rect(0, 0, 320, 50)).setTo(studio);
+  img(cv::Rect(100, 30, 30, 150)).setTo(skin);            // stands in front of the studio
+  img(cv::Rect(200, 120, 30, 30)).setTo(skin);
+  img(cv::Rect(210, 130, 10, 10)).setTo(studio);          // studio-coloured patch on it
+  Keyer keyer;
+  const KeyResult r = keyer.key(img, "hand-made");
+  auto at = [&](int x, int y) { return r.silhouette.at<std::uint8_t>(y, x); };
+  EXPECT_EQ(at(20, 20), 0);      // surroundings
+  EXPECT_EQ(at(115, 40), 255);   // actor over the surroundings
+  EXPECT_EQ(at(115, 100), 255);
+  EXPECT_EQ(at(215, 135), 255);  // dark patch enclosed by the actor
+  EXPECT_GT(r.stats.garbage_px, 300 * 40);
+  EXPECT_NEAR(cv::countNonZero(r.silhouette), 30 * 150 + 30 * 30, 4);
+}
+
+TEST(Keyer, SoftAlphaCanBeSkipped) {
+  cv::Mat img(60, 80, CV_8UC3, cv::Vec3b(99, 183, 81));
+  img(cv::Rect(20, 20, 30, 20)).setTo(cv::Vec3b(60, 70, 170));
+  KeyerOptions options;
+  options.soft_alpha = false;
+  Keyer keyer(options);
+  const KeyResult r = keyer.key(img);
+  EXPECT_TRUE(r.alpha.empty());
+  EXPECT_EQ(cv::countNonZero(r.silhouette), 30 * 20);
+  EXPECT_THROW(despill(img, r, keyer.screen()), Error);
+}
+
+TEST(Keyer, BadInputNamesTheSource) {
+  Keyer keyer;
+  try {
+    keyer.key(cv::Mat(), "cams/witness03/000012.png");
+    FAIL() << "empty image accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, "cams/witness03/000012.png");
+    EXPECT_NE(std::string(e.what()).find("empty"), std::string::npos) << e.what();
+  }
+  try {
+    keyer.key(cv::Mat(10, 10, CV_8UC1, cv::Scalar(0)), "cams/main/000001.png");
+    FAIL() << "grey image accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, "cams/main/000001.png");
+    EXPECT_NE(std::string(e.what()).find("8-bit 3-channel"), std::string::npos) << e.what();
+  }
+  // No screen in view: nothing to key against.
+  EXPECT_THROW(keyer.key(cv::Mat(40, 40, CV_8UC3, cv::Scalar(128, 128, 128)), "grey"), Error);
+  // A frame unlike the clean plate's size.
+  Keyer with_plate;
+  with_plate.setCleanPlate(cv::Mat(40, 40, CV_8UC3, cv::Scalar(99, 183, 81)), "plate");
+  try {
+    with_plate.key(cv::Mat(20, 40, CV_8UC3, cv::Scalar(99, 183, 81)), "frame 7");
+    FAIL() << "size mismatch accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, "frame 7");
+  }
+}
+
+TEST(Keyer, OptionsNameTheBadField) {
+  auto field = [](KeyerOptions o) {
+    try {
+      o.validate();
+    } catch (const Error& e) {
+      return e.context().field;
+    }
+    return std::string();
+  };
+  EXPECT_EQ(field(KeyerOptions{}), "");
+  KeyerOptions o;
+  o.silhouette_threshold = 1.5;
+  EXPECT_EQ(field(o), "silhouette_threshold");
+  o = {};
+  o.min_blob_px = -1;
+  EXPECT_EQ(field(o), "min_blob_px");
+  o = {};
+  o.edge_radius_px = 0;
+  EXPECT_EQ(field(o), "edge_radius_px");
+  o = {};
+  o.plate_tolerance = 0;
+  EXPECT_EQ(field(o), "plate_tolerance");
+  o = {};
+  o.threads = -2;
+  EXPECT_EQ(field(o), "threads");
+  o = {};
+  o.min_hole_px = -3;
+  EXPECT_THROW(Keyer{o}, Error);
+}
+
+// OpenMP changes nothing: rows are independent and every reduction is an integer count.
+TEST(Keyer, SameResultForAnyThreadCount) {
+  const Studio s;
+  const cv::Mat bgr = s.render(4, kTimes[1], synth::kLayersPlate, false).bgr;
+  KeyerOptions one;
+  one.threads = 1;
+  KeyerOptions four;
+  four.threads = 4;
+  Keyer a(one), b(four);
+  const KeyResult ra = a.key(bgr), rb = b.key(bgr);
+  EXPECT_EQ(cv::countNonZero(ra.silhouette != rb.silhouette), 0);
+  EXPECT_EQ(cv::norm(ra.alpha, rb.alpha, cv::NORM_INF), 0.0);
+}
+
+}  // namespace
+}  // namespace previz::carving

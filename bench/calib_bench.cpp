@@ -1,6 +1,7 @@
 // Calibration benchmarks on the thesis camera (1200x900, f 800, k1 0.2): the intrinsic solve on
 // 20 views (OpenCV initialisation + Ceres + covariance), view selection per streamed view, board
-// detection per image and frontal re-detection per view.
+// detection per image (cornerSubPix alone and with the model fit) and frontal re-detection per
+// view.
 // Google Benchmark's table first, then one JSON line per case on stdout (median of a few runs).
 #include <benchmark/benchmark.h>
 
@@ -191,10 +192,16 @@ void printJsonLines() {
     }
   }
   for (const RenderedBoard& r : renderedBoards()) {
+    // cornerSubPix alone, then with the model fit (the default; chessboard and ChArUco).
     ViewObservations found;
-    const double ms = medianMs([&] { found = detectBoard(r.image, r.board); }, 5);
-    std::printf("{\"stage\":\"calib_detect\",\"board\":\"%s\",\"size\":\"1200x900\",\"ms\":%.3f,\"points\":%zu}\n",
-                toString(r.board.type), ms, found.points.size());
+    for (bool fit : {false, true}) {
+      DetectOptions options;
+      options.model_fit = fit;
+      const double ms = medianMs([&] { found = detectBoard(r.image, r.board, options); }, 5);
+      std::printf("{\"stage\":\"calib_detect\",\"board\":\"%s\",\"refine\":\"%s\",\"size\":\"1200x900\","
+                  "\"ms\":%.3f,\"points\":%zu}\n",
+                  toString(r.board.type), fit ? "model fit" : "cornerSubPix", ms, found.points.size());
+    }
     if (!found.found()) continue;
     ViewObservations frontal;
     const double fms = medianMs(

@@ -183,6 +183,46 @@ std::vector<bool> refineCorners(const DetectInput& input, std::vector<cv::Point2
   return ok;
 }
 
+std::vector<bool> fitPatterns(const DetectInput& input, std::vector<cv::Point2f>& points,
+                              const std::vector<Eigen::Matrix3d>& H_px_board,
+                              const std::vector<LocalPattern>& patterns,
+                              const std::vector<LineBending>& bending,
+                              const std::vector<bool>& todo) {
+  std::vector<bool> fitted(points.size(), false);
+  if (!input.options().model_fit) return fitted;
+  PatternFitOptions options;
+  options.max_radius_px = kPatternFitRadiusPx;
+  options.srgb = input.options().linear_light;
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (!todo[k]) continue;
+    // Move the homography onto the point: a translation in the image.
+    const Eigen::Vector2d at = (H_px_board[k] * Eigen::Vector3d(0, 0, 1)).hnormalized();
+    Eigen::Matrix3d shift = Eigen::Matrix3d::Identity();
+    shift(0, 2) = points[k].x - at.x();
+    shift(1, 2) = points[k].y - at.y();
+    const PatternFit fit =
+        fitLocalPattern(input.grey(), shift * H_px_board[k], patterns[k], options, bending[k]);
+    if (!fit.ok) continue;  // keeps cornerSubPix's position
+    points[k] = cv::Point2f(static_cast<float>(fit.px.x()), static_cast<float>(fit.px.y()));
+    fitted[k] = true;
+  }
+  return fitted;
+}
+
+LineBending::Line bendLine(const Eigen::Vector2d* before, double before_m,
+                           const Eigen::Vector2d& at, const Eigen::Vector2d* after,
+                           double after_m) {
+  LineBending::Line line;
+  if (!before || !after) return line;
+  line.valid = true;
+  line.before_m = before_m;
+  line.after_m = after_m;
+  line.before_px = *before;
+  line.at_px = at;
+  line.after_px = *after;
+  return line;
+}
+
 Eigen::Vector2i GridMapping::map(int i, int j) const {
   switch (transform) {
     case 0:

@@ -249,6 +249,10 @@ void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObserva
   std::vector<cv::Point2f> pts;
   std::vector<RefineWindow> windows;
   std::vector<int> ids;
+  std::vector<Eigen::Matrix3d> local_H;  // board metres relative to the corner -> px
+  std::vector<LocalPattern> patterns;
+  // The markers' black border: one bit cell of the dictionary's code grid plus its border.
+  const double border_m = m / (dictionary->markerSize + 2);
   for (int r = 0; r + 1 < board.rows; ++r)
     for (int c = 0; c + 1 < board.cols; ++c) {
       // Both white squares touching the corner must have their marker (OpenCV's minMarkers 2).
@@ -300,9 +304,36 @@ void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObserva
       ids.push_back(r * (board.cols - 1) + c);
       pts.emplace_back(static_cast<float>(predicted.x()), static_cast<float>(predicted.y()));
       windows.push_back(window);
+      Eigen::Matrix3d to_corner = Eigen::Matrix3d::Identity();
+      to_corner.block<2, 1>(0, 2) = corner_board;
+      local_H.push_back(H * to_corner);
+      patterns.push_back(charucoCornerPattern(s, m, border_m, r, c, isWhite));
     }
   std::vector<bool> ok(pts.size(), true);
   if (options.subpixel) ok = refineCorners(input, pts, windows);
+  if (options.subpixel && options.model_fit) {
+    // The model fit (detect_common.h) with the markers' corners next to each point modelled:
+    // cornerSubPix's window must stay clear of them, and its rim still catches their blur
+    // unevenly under perspective. Line bends from the refined neighbours one square away along
+    // board x and y.
+    std::map<int, Eigen::Vector2d> refined;
+    for (size_t k = 0; k < pts.size(); ++k)
+      if (ok[k]) refined[ids[k]] = Eigen::Vector2d(pts[k].x, pts[k].y);
+    const int nc = board.cols - 1;
+    auto find = [&](int c, int r) -> const Eigen::Vector2d* {
+      if (c < 0 || r < 0 || c >= nc || r + 1 >= board.rows) return nullptr;
+      const auto it = refined.find(r * nc + c);
+      return it == refined.end() ? nullptr : &it->second;
+    };
+    std::vector<LineBending> bending(pts.size());
+    for (size_t k = 0; k < pts.size(); ++k) {
+      const int c = ids[k] % nc, r = ids[k] / nc;
+      const Eigen::Vector2d here(pts[k].x, pts[k].y);
+      bending[k].along_x = bendLine(find(c - 1, r), -s, here, find(c + 1, r), s);
+      bending[k].along_y = bendLine(find(c, r - 1), -s, here, find(c, r + 1), s);
+    }
+    fitPatterns(input, pts, local_H, patterns, bending, ok);
+  }
   for (size_t k = 0; k < pts.size(); ++k)
     if (ok[k]) out.points.push_back({ids[k], Eigen::Vector2d(pts[k].x, pts[k].y)});
   if (out.points.empty())

@@ -1,6 +1,7 @@
 // Chessboard: OpenCV finds the grid of inner corners (the sector-based detector first, the
 // classic quad detector as a fall-back); the ids come from the grid's geometry and the square
 // colours, not from OpenCV's ordering, which may start at any corner of the grid.
+#include <array>
 #include <cmath>
 #include <string>
 
@@ -21,6 +22,62 @@ double patchMean(const cv::Mat& grey, const Eigen::Vector2d& px) {
   for (int dv = -1; dv <= 1; ++dv)
     for (int du = -1; du <= 1; ++du) sum += grey.at<std::uint8_t>(v + dv, u + du);
   return sum / 9.0;
+}
+
+// The model fit (detect_common.h fitPatterns) of every refined corner: the local homography
+// from the 3 x 3 corners around it (refined where they were), the pattern the two black squares
+// at it. A corner whose fit fails keeps cornerSubPix's position.
+template <typename At>
+void fitChessboardCorners(const DetectInput& input, const BoardSpec& board,
+                          const GridMapping& mapping, const At& at,
+                          const std::vector<Eigen::Vector2i>& lattice, const std::vector<bool>& ok,
+                          std::vector<cv::Point2f>& pts) {
+  const int ni = board.cols - 1, nj = board.rows - 1;
+  std::vector<int> index(static_cast<size_t>(ni * nj), -1);
+  for (size_t k = 0; k < pts.size(); ++k)
+    if (ok[k])
+      index[static_cast<size_t>(lattice[k].y() * ni + lattice[k].x())] = static_cast<int>(k);
+  const std::vector<cv::Point2f> refined = pts;
+  auto position = [&](int i, int j) {
+    const int k = index[static_cast<size_t>(j * ni + i)];
+    return k >= 0 ? Eigen::Vector2d(refined[k].x, refined[k].y) : at(i, j);
+  };
+  std::vector<Eigen::Matrix3d> H(pts.size(), Eigen::Matrix3d::Identity());
+  std::vector<LocalPattern> patterns(pts.size());
+  std::vector<LineBending> bending(pts.size());
+  std::vector<bool> todo = ok;
+  for (size_t k = 0; k < pts.size(); ++k) {
+    if (!ok[k]) continue;
+    const int i = lattice[k].x(), j = lattice[k].y();
+    const Eigen::Vector2i cr = mapping.map(i, j);
+    std::vector<Eigen::Vector2d> from, to;
+    // The neighbours one square away along board x and y (either side), for the line bends.
+    const Eigen::Vector2d* along[2][2] = {{nullptr, nullptr}, {nullptr, nullptr}};
+    std::array<Eigen::Vector2d, 9> neighbour;
+    for (int dj = -1; dj <= 1; ++dj)
+      for (int di = -1; di <= 1; ++di) {
+        if (i + di < 0 || j + dj < 0 || i + di >= ni || j + dj >= nj) continue;
+        const Eigen::Vector2i offset = mapping.map(i + di, j + dj) - cr;
+        from.push_back(offset.cast<double>() * board.square_m);
+        to.push_back(position(i + di, j + dj));
+        Eigen::Vector2d& n = neighbour[static_cast<size_t>((dj + 1) * 3 + di + 1)];
+        n = to.back();
+        if (std::abs(offset.x()) + std::abs(offset.y()) == 1)
+          along[offset.x() != 0 ? 0 : 1][offset.x() + offset.y() > 0 ? 1 : 0] = &n;
+      }
+    const double s = board.square_m;
+    const Eigen::Vector2d here = position(i, j);
+    bending[k].along_x = bendLine(along[0][0], -s, here, along[0][1], s);
+    bending[k].along_y = bendLine(along[1][0], -s, here, along[1][1], s);
+    if (!fitGridHomography(from, to, H[k])) {
+      todo[k] = false;
+      continue;
+    }
+    // Black squares: (row + column) even (core/board.h, studio_board.cpp).
+    patterns[k] = chessboardCornerPattern(board.square_m, cr.y(), cr.x(),
+                                          [](int sr, int sc) { return (sr + sc) % 2 == 0; });
+  }
+  fitPatterns(input, pts, H, patterns, bending, todo);
 }
 
 }  // namespace
@@ -91,6 +148,7 @@ void detectChessboard(const DetectInput& input, const BoardSpec& board, ViewObse
   std::vector<cv::Point2f> pts;
   std::vector<RefineWindow> windows;
   std::vector<int> ids;
+  std::vector<Eigen::Vector2i> lattice;  // (i, j) of each point
   for (int j = 0; j < nj; ++j)
     for (int i = 0; i < ni; ++i) {
       auto step = [&](int di, int dj) {
@@ -122,9 +180,13 @@ void detectChessboard(const DetectInput& input, const BoardSpec& board, ViewObse
       ids.push_back(cr.y() * (board.cols - 1) + cr.x());
       pts.emplace_back(static_cast<float>(at(i, j).x()), static_cast<float>(at(i, j).y()));
       windows.push_back(window);
+      lattice.emplace_back(i, j);
     }
   std::vector<bool> ok(pts.size(), true);
-  if (options.subpixel) ok = refineCorners(input, pts, windows);
+  if (options.subpixel) {
+    ok = refineCorners(input, pts, windows);
+    if (options.model_fit) fitChessboardCorners(input, board, mapping, at, lattice, ok, pts);
+  }
   for (size_t k = 0; k < pts.size(); ++k)
     if (ok[k]) out.points.push_back({ids[k], Eigen::Vector2d(pts[k].x, pts[k].y)});
   if (out.points.empty())

@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "calib/detail/pattern_fit.h"
 #include "calib/detect.h"
 
 namespace previz::calib::detail {
@@ -75,6 +76,27 @@ double imageEdgeSigma(const DetectInput& input, const std::vector<cv::Point2f>& 
 // marked false. Points with half 0 are left as they are and marked false.
 std::vector<bool> refineCorners(const DetectInput& input, std::vector<cv::Point2f>& points,
                                 const std::vector<RefineWindow>& windows);
+
+// Model-based refinement (pattern_fit.h) after cornerSubPix, for the points marked in `todo`,
+// when options().model_fit: point k is fitted with patterns[k] seen through H_px_board[k] (board
+// metres relative to the point -> pixels; only its shape is used, it is moved onto points[k]
+// first) with its lines bent by bending[k], over the pixels within kPatternFitRadiusPx that are
+// clear of everything the pattern does not model. Fitted points are replaced (the others keep
+// cornerSubPix's position); the result says which were. On the thesis scene (tests/calib) it
+// took the chessboard's corner noise from 0.020 to 0.005 px a coordinate and the ChArUco
+// corners' median error against the truth from 0.037 to 0.009 px.
+constexpr double kPatternFitRadiusPx = 10.0;
+std::vector<bool> fitPatterns(const DetectInput& input, std::vector<cv::Point2f>& points,
+                              const std::vector<Eigen::Matrix3d>& H_px_board,
+                              const std::vector<LocalPattern>& patterns,
+                              const std::vector<LineBending>& bending,
+                              const std::vector<bool>& todo);
+
+// One line of a LineBending: the point and its neighbours before_m and after_m along the line
+// (null: missing).
+LineBending::Line bendLine(const Eigen::Vector2d* before, double before_m,
+                           const Eigen::Vector2d& at, const Eigen::Vector2d* after,
+                           double after_m);
 
 // --- Grid orientation ------------------------------------------------------------------------
 // A lattice of ni x nj nodes (i along the first axis) found in the image, some nodes possibly

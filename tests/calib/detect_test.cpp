@@ -417,7 +417,9 @@ TEST(DetectBadInput, EmptyOrWrongTypeImageThrowsNamingTheSource) {
 // Real webcam images (OpenCV's sample stereo pair, 9 x 6 inner corners): the same corners as
 // OpenCV's own findChessboardCorners + cornerSubPix with an 11 x 11 window (half size 5, our
 // default) and the criteria of its stereo_calib sample, when run like it (8-bit values, no
-// pre-filter); and how far our defaults (linear light, pre-filter) move them.
+// pre-filter, no model fit); and how far our defaults (linear light, pre-filter, model fit) move
+// them: 0.12 px median, 0.48 px at most. Which corners are better is judged by the calibration
+// residual (intrinsics_test RealChessboardModelFitLowersResidual).
 TEST(DetectRealChessboard, MatchesOpenCvWithinTenthPixelOnEveryImage) {
   const std::filesystem::path folder =
       std::filesystem::path(PREVIZ_SHARED_DATA) / "opencv-chessboard";
@@ -431,6 +433,7 @@ TEST(DetectRealChessboard, MatchesOpenCvWithinTenthPixelOnEveryImage) {
   DetectOptions like_opencv;
   like_opencv.linear_light = false;
   like_opencv.prefilter_sigma_px = 0;
+  like_opencv.model_fit = false;
   int images = 0;
   double worst = 0, worst_default = 0;
   std::vector<double> all_default;

@@ -125,17 +125,26 @@ TEST(Frontal, RefinementLowersCircleGridError) {
   EXPECT_LT(after, before);
 }
 
-// ChArUco corners carry no perspective bias to remove, and resampling adds noise (with the true
-// model, corner error 0.046 px original vs 0.048-0.056 px frontal on this scene), so for corner
-// boards the refinement keeps the original positions (FrontalReplace::kAuto) and gains the
-// corners whose markers only the rectified image lets the detector read. It must add points and
-// not cost accuracy beyond noise.
-TEST(Frontal, RefinementAddsCharucoCornersWithoutLoss) {
-  const Gain g = refineAndPrint(BoardType::kCharuco, 1);
-  std::printf("  charuco: projection error vs truth %.4f -> %.4f px, |df| %.4f -> %.4f px, points %d -> %d\n",
-              g.before, g.after, g.f_before, g.f_after, g.points_before, g.points_after);
-  EXPECT_GT(g.points_after, g.points_before);
-  EXPECT_LT(g.after, 1.1 * g.before);
+// ChArUco: detectBoard's model fit already takes the perspective and the lens bend into account
+// in the original image, and re-detected corners are noisier than the original ones (see
+// FrontalReplace::kAuto), so the refinement keeps the original corners and gains those whose
+// markers only the rectified image lets the detector read (~10 % more points, in the far and
+// oblique parts of the views). They lower the projection error against the truth: measured
+// 0.0303 -> 0.0295 and 0.0249 -> 0.0149 px on seeds 1 and 2, and lower on each of seeds 7-12
+// (mean 0.0190 -> 0.0159 px). Replacing the corners as well gave no gain on average.
+TEST(Frontal, RefinementLowersCharucoError) {
+  double before = 0, after = 0;
+  for (std::uint64_t seed : {1, 2}) {
+    const Gain g = refineAndPrint(BoardType::kCharuco, seed);
+    std::printf("  charuco seed %d: projection error vs truth %.4f -> %.4f px, |df| %.4f -> %.4f px, "
+                "points %d -> %d\n",
+                static_cast<int>(seed), g.before, g.after, g.f_before, g.f_after, g.points_before,
+                g.points_after);
+    EXPECT_GT(g.points_after, g.points_before);
+    before += g.before;
+    after += g.after;
+  }
+  EXPECT_LT(after, before);
 }
 
 // The frontal image shows the board as printed: a board point lands where makeFrontalView says.

@@ -247,21 +247,22 @@ std::pair<Table51, Table51> runTable51(BoardType type, int seeds) {
   return {rows[0], rows[1]};
 }
 
-// The thesis targets: |dc| <= 0.1 px, |dk1| <= 0.001 and every truth within 3 sigma are
-// asserted as such. |df| <= 0.05 px is asserted where the data can support it: with this scene
-// and detector sigma(f) is ~0.048 px for the chessboard (165 corners a view, 0.045 px corner
-// error, which 64 spp instead of 36 does not lower: the noise dominates) and ~0.097 px for
-// ChArUco (~62 corners a view), so a 5-seed median under 0.05 px is a coin toss on one rendered
-// geometry (the seeds share the geometry and the anti-aliasing error, so their errors are not
-// independent: measured medians 0.012-0.066 px as the renderer and the noise generator changed).
-// |df| is held to max(0.05 px, 2 sigma(f)) and whether the thesis figure was met is printed.
+// The thesis targets, asserted as such: median |df| <= 0.05 px, |dc| <= 0.1 px, |dk1| <= 0.001,
+// and every truth within 3 sigma. What made f reachable is the corner refiner: cornerSubPix
+// alone left 0.020 px of noise a coordinate on the chessboard (twice the Cramer-Rao bound of its
+// window) and, on ChArUco, a -0.07 px bias in f from marker edges caught unevenly by its small
+// windows under perspective (sigma f 0.042 and 0.096 px, medians 0.065 and 0.073 px). The model
+// fit (DetectOptions::model_fit, calib/detail/pattern_fit.h) measures 0.005 px a coordinate
+// (sigma f 0.015 and 0.021 px). Checked beyond these seeds: noise seeds 6-25 give 5-seed
+// medians 0.007-0.011 px (chessboard) and 0.014-0.036 px (ChArUco); a second rendered pose
+// set 0.019-0.022 and 0.008 px. What is left on ChArUco (a +0.015-0.03 px bias) comes from
+// the renderer's defocus, a discrete Gaussian on pixel values that shifts edges within a few
+// degrees of the pixel axes by up to 0.02 px; rendered with a continuous blur it is +0.009 px.
 void expectThesisTargets(const Table51& t) {
-  const double f_limit = std::max(0.05, 2.0 * t.median_sigma_f);
-  const bool f_met = median(t.dfx) <= 0.05 && median(t.dfy) <= 0.05;
-  std::printf("  thesis f target (0.05 px): %s (median sigma f %.4f px)\n", f_met ? "met" : "not met",
-              t.median_sigma_f);
-  EXPECT_LE(median(t.dfx), f_limit);
-  EXPECT_LE(median(t.dfy), f_limit);
+  std::printf("  thesis f target (0.05 px): %s (median sigma f %.4f px)\n",
+              median(t.dfx) <= 0.05 && median(t.dfy) <= 0.05 ? "met" : "not met", t.median_sigma_f);
+  EXPECT_LE(median(t.dfx), 0.05);
+  EXPECT_LE(median(t.dfy), 0.05);
   EXPECT_LE(median(t.dcx), 0.1);
   EXPECT_LE(median(t.dcy), 0.1);
   EXPECT_LE(median(t.dk1), 0.001);
@@ -280,21 +281,27 @@ TEST(Intrinsics, Table51CharucoMeetsThesisTargets) {
   EXPECT_EQ(full.within, full.checked) << "worst: " << full.worst << " at " << full.worst_ratio;
 }
 
-// AprilGrid corners come from libapriltag's quad fit (about 0.1 px here) and circle centres
-// carry the perspective bias of ellipse centres (calib/frontal.h removes it): asserted at what
-// they measure, with margin (see the report for the figures).
+// AprilGrid corners are refined by cornerSubPix alone (detect.h model_fit) and circle centres
+// carry the perspective bias of ellipse centres (calib/frontal.h removes it). Their sigma f at
+// this noise is 0.068 and 0.044 px, so the thesis' 0.05 px is not a bound two seeds can be held
+// to; they are held to 4 sigma and to the truth within 3 sigma (measured medians: AprilGrid
+// |dfx| 0.042 px, circles 0.011 px).
+void expectWithinSigma(const Table51& t) {
+  EXPECT_LE(median(t.dfx), 4 * t.median_sigma_f);
+  EXPECT_LE(median(t.dfy), 4 * t.median_sigma_f);
+  EXPECT_LE(median(t.dcx), 4 * t.median_sigma_c);
+  EXPECT_LE(median(t.dk1), 0.002);
+  EXPECT_EQ(t.within, t.checked) << "worst: " << t.worst << " at " << t.worst_ratio << " sigma";
+}
+
 TEST(Intrinsics, Table51AprilGridMeasured) {
   const auto [full, radial] = runTable51(BoardType::kAprilGrid, 2);
-  EXPECT_LE(median(radial.dfx), 0.5);
-  EXPECT_LE(median(radial.dcx), 0.5);
-  EXPECT_LE(median(radial.dk1), 0.002);
+  expectWithinSigma(radial);
 }
 
 TEST(Intrinsics, Table51CirclesMeasured) {
   const auto [full, radial] = runTable51(BoardType::kCircles, 2);
-  EXPECT_LE(median(radial.dfx), 0.5);
-  EXPECT_LE(median(radial.dcx), 0.5);
-  EXPECT_LE(median(radial.dk1), 0.002);
+  expectWithinSigma(radial);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -361,6 +368,44 @@ TEST(Intrinsics, RealChessboardAgreesWithOpenCv) {
   EXPECT_LE(ours.rms_all_px, cv_rms + 0.01);
   EXPECT_NEAR(ours.camera.fx, K.at<double>(0, 0), 3 * ours.sigma[0]);
   EXPECT_NEAR(ours.camera.cx, K.at<double>(0, 2), 3 * ours.sigma[2]);
+}
+
+// The model fit on real corners (no truth here): the same 13 images calibrated with the
+// corners cornerSubPix gives and with the fitted ones. Fitted corners agree with one camera
+// model better: RMS 0.2116 -> 0.1600 px measured (0.1836 -> 0.1603 px when the images are read
+// as not sRGB-encoded; the right camera 0.2335 -> 0.1579 px).
+TEST(Intrinsics, RealChessboardModelFitLowersResidual) {
+  const std::filesystem::path dir = std::filesystem::path(PREVIZ_SHARED_DATA) / "opencv-chessboard";
+  std::vector<std::filesystem::path> files;
+  if (std::filesystem::is_directory(dir)) {
+    for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+      const std::string name = entry.path().filename().string();
+      if (name.rfind("left", 0) == 0 && entry.path().extension() == ".jpg") files.push_back(entry.path());
+    }
+  }
+  ASSERT_EQ(files.size(), 13u) << "expected 13 images " << (dir / "left*.jpg").string();
+  BoardSpec board;
+  board.type = BoardType::kChessboard;
+  board.rows = 7;
+  board.cols = 10;
+  board.square_m = 1.0;
+  board.margin_m = 0.5;
+  double rms[2];
+  for (int fit = 0; fit < 2; ++fit) {
+    DetectOptions options;
+    options.model_fit = fit == 1;
+    std::vector<ViewObservations> views;
+    for (const auto& f : files) {
+      const cv::Mat image = readImage(f, cv::IMREAD_GRAYSCALE);
+      views.push_back(detectBoard(image, board, options, f.filename().string()));
+      views.back().image_size = image.size();
+    }
+    const IntrinsicsResult r = calibrateIntrinsics(views, board);
+    rms[fit] = r.rms_all_px;
+    std::printf("  %s: RMS %.4f px, fx %.3f +- %.3f\n", fit ? "model fit  " : "cornerSubPix",
+                r.rms_all_px, r.camera.fx, r.sigma[0]);
+  }
+  EXPECT_LT(rms[1], 0.85 * rms[0]);
 }
 
 }  // namespace

@@ -336,9 +336,14 @@ inline std::vector<ViewObservations> detectedViews(const RenderedSet& set, doubl
 }
 
 // Thesis Table 5.1 scene: 20 views, blur 1 px, noise 2 grey levels. Anti-aliasing: 36 samples
-// per pixel for the chessboard (64 gives the same corner error, 0.045 px: the noise dominates
-// from there), 16 for the others. The renderer's default 4 leave ~0.08 px of corner error from coverage quantisation
-// alone (measured noise-free: 0.082 px at 4 spp, 0.053 at 16, 0.028 at 36, 0.023 at 64).
+// per pixel for the chessboard, 16 for the others. The renderer's default 4 leave ~0.08 px of
+// corner error from coverage quantisation alone (cornerSubPix, noise-free: 0.082 px at 4 spp,
+// 0.053 at 16, 0.028 at 36, 0.023 at 64). With the model fit (detect.h) the chessboard's f error
+// is +0.02-0.04 px at 16 spp and -0.005-+0.01 px at 36 (5 noise seeds). What the renderer still
+// leaves at any spp: its defocus is a discrete Gaussian on pixel values, which shifts edges
+// within a few degrees of the pixel axes by up to ~0.02 px depending on their sub-pixel phase
+// (calib/detail/pattern_fit.h's fit: 0.011-0.020 px rms there against 0.001 px with a
+// continuous blur); it leaves ChArUco's f at +0.015-0.03 px (see intrinsics_test).
 constexpr int kTable51Views = 20;
 constexpr double kTable51Blur = 1.0;
 constexpr double kTable51Noise = 2.0;

@@ -44,6 +44,9 @@ struct Witness {
   const RigCamera* rc = nullptr;
   Pose T_cam_world;
   cv::Mat bgr;         // the plate (8-bit, sRGB)
+  double gain = 1;     // given (> 0) or estimated (estimateGains)
+  bool estimated = false;
+  int gain_samples = 0;
   float inv_gain = 1;
   cv::Mat front;       // nearest hull depth per kVisibilityBlock^2 pixels (visibilityMap)
 };
@@ -103,6 +106,59 @@ float colourDistance(const float* a, const float* b) {
   return diff / std::max(level, 0.03f);
 }
 
+// Gains the caller does not know (<= 0), relative to the depth camera's: where the hull depth
+// is the surface (almost everywhere: the hull is within millimetres of it outside concavities)
+// a witness sees the same Lambertian point at that point's depth on its own hull surface, so the
+// ratio of the two plates' linear brightness there is the ratio of the gains; the median over
+// every 2nd pixel in each direction rejects the concavities, occlusions and edges. Fewer than
+// kMinGainSamples points (a witness facing the actor's other side, which then hardly ever sees
+// a candidate either): gain 1.
+constexpr int kMinGainSamples = 50;
+void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain,
+                   const cv::Mat& hull_depth, std::vector<Witness>& witnesses) {
+  const std::array<float, 256>& lin = srgbToLinear();
+  const Camera& cam = camera.camera;
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  for (Witness& w : witnesses) {
+    if (w.gain > 0) {
+      w.inv_gain = static_cast<float>(1.0 / w.gain);
+      continue;
+    }
+    std::vector<float> ratios;
+    for (int v = 0; v < cam.height; v += 2)
+      for (int u = 0; u < cam.width; u += 2) {
+        const double t = hull_depth.at<float>(v, u);
+        if (!std::isfinite(t)) continue;
+        const std::uint8_t* m = bgr.ptr<std::uint8_t>(v) + 3 * u;
+        const float main_level = lin[m[0]] + lin[m[1]] + lin[m[2]];
+        if (main_level < 0.03f) continue;  // too dark to measure a ratio
+        const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+        if (!ray) continue;
+        const Eigen::Vector3d X = centre + t * (R * (*ray / ray->z()));
+        const Eigen::Vector3d q = w.T_cam_world * X;
+        const auto px = w.rc->camera.project(q);
+        if (!px) continue;
+        const int iu = static_cast<int>(std::floor((px->x() + 0.5) / kVisibilityBlock));
+        const int iv = static_cast<int>(std::floor((px->y() + 0.5) / kVisibilityBlock));
+        if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
+        if (!(std::abs(q.z() - w.front.at<float>(iv, iu)) < 0.02)) continue;
+        float cw[3];
+        if (!sample(w.bgr, 1.0f, px->x(), px->y(), cw)) continue;
+        ratios.push_back((cw[0] + cw[1] + cw[2]) / main_level);
+      }
+    w.estimated = true;
+    w.gain_samples = static_cast<int>(ratios.size());
+    if (static_cast<int>(ratios.size()) < kMinGainSamples) {
+      w.gain = 1.0;
+    } else {
+      std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+      w.gain = main_gain * ratios[ratios.size() / 2];
+    }
+    w.inv_gain = static_cast<float>(1.0 / w.gain);
+  }
+}
+
 }  // namespace
 
 void RefineOptions::validate() const {
@@ -158,17 +214,26 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
     w.rc = &cams[c];
     w.T_cam_world = cams[c].T_world_cam.inverse();
     w.bgr = witness_plates[c].bgr;
-    w.inv_gain = static_cast<float>(1.0 / witness_plates[c].gain);
+    w.gain = witness_plates[c].gain;
     w.front = visibilityMap(carver, hull, cams[c], witness_masks[c]);
     witnesses.push_back(std::move(w));
     local.witnesses_used.push_back(cams[c].camera.name);
   }
   cv::Mat out = hull_depth.clone();
   const std::array<float, 256>& lin = srgbToLinear();
-  const float main_inv_gain = static_cast<float>(1.0 / plate.gain);
+  const double main_gain = plate.gain > 0 ? plate.gain : 1.0;
+  const float main_inv_gain = static_cast<float>(1.0 / main_gain);
   const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
   const Eigen::Matrix3d R = camera.T_world_cam.linear();
   const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  estimateGains(camera, plate.bgr, main_gain, hull_depth, witnesses);
+  for (const Witness& w : witnesses) {
+    local.witness_gains.push_back(w.gain);
+    if (w.estimated) {
+      local.gains_estimated.push_back(w.rc->camera.name);
+      local.gain_samples.push_back(w.gain_samples);
+    }
+  }
   const int n_steps = static_cast<int>(std::floor(options.search_m / options.step_m));
   const int nw = static_cast<int>(witnesses.size());
   long long pixels = 0, inconsistent = 0, moved = 0;

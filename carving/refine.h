@@ -38,6 +38,9 @@ struct RefineOptions {
 
 // One camera's plate for refinement: 8-bit BGR (sRGB-encoded), the camera's full image size,
 // and its linear gain (the plate's linear radiance = gain x the scene's); empty = not used.
+// gain <= 0 = unknown: a witness' gain is then estimated from the frame relative to the depth
+// camera's (refine.cpp, estimateGains); the depth camera's unknown gain is taken as 1 (only
+// the ratios matter).
 struct Plate {
   cv::Mat bgr;
   double gain = 1.0;
@@ -49,6 +52,9 @@ struct RefineStats {
   long long moved = 0;       // given a deeper depth
   double ms = 0;
   std::vector<std::string> witnesses_used;
+  std::vector<double> witness_gains;         // the gains used, same order
+  std::vector<std::string> gains_estimated;  // witnesses whose gain was estimated
+  std::vector<int> gain_samples;             // points each estimate is the median of
 };
 
 // Refined depth of 'camera' (CV_32FC1, z along its axis, +inf where hull_depth is): hull_depth

@@ -184,6 +184,7 @@ nlohmann::json FrameReport::toJson() const {
                                           {"pixels", refine_pixels},
                                           {"moved", refine_moved},
                                           {"witnesses", refine_witnesses},
+                                          {"gains_estimated", refine_gains_estimated},
                                           {"ms", refine_ms}}},
           {"mesh_vertices", mesh_vertices},
           {"mesh_faces", mesh_faces},
@@ -324,6 +325,7 @@ struct CarveJob::Impl {
       report.refine_pixels = stats.pixels;
       report.refine_moved = stats.moved;
       report.refine_witnesses = stats.witnesses_used;
+      report.refine_gains_estimated = stats.gains_estimated;
       report.refine_ms = stats.ms;
     }
     writeDepthExr(path("depth_refined", frame, ".exr"), refined,

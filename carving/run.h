@@ -83,6 +83,7 @@ struct FrameReport {
   std::string refine_source;
   long long refine_pixels = 0, refine_moved = 0;
   std::vector<std::string> refine_witnesses;
+  std::vector<std::string> refine_gains_estimated;  // witnesses whose gain take.json lacks
   double refine_ms = 0;
   long long mesh_vertices = 0, mesh_faces = 0, points = 0;
   // key: read + key (or read masks); mesh: Carver::mesh; export: point cloud + every write of

@@ -262,7 +262,7 @@ CameraFrame Take::readPlate(const std::string& camera, int frame) const {
 
 double Take::gain(const std::string& camera) const {
   const auto it = gains_.find(camera);
-  return it == gains_.end() ? 1.0 : it->second;
+  return it == gains_.end() ? 0.0 : it->second;
 }
 
 RigCamera Take::cameraAt(const std::string& camera, int frame) const {

@@ -73,7 +73,7 @@ class Take {
   CameraFrame readPlate(const std::string& camera, int frame) const;
 
   // The camera's linear gain from take.json "camera_gains" (a synthetic take's per-camera
-  // brightness); 1 when the take does not say.
+  // brightness); 0 = unknown when the take does not say (refinement then estimates it).
   double gain(const std::string& camera) const;
 
   // The camera as it was at that frame (the main camera's pose from main_poses when given).

@@ -133,12 +133,31 @@ TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
   EXPECT_GT(r.refined.front[0], r.hull.front[0] + 0.03);
   EXPECT_GE(r.refined.behind[0], 0.99);
 
-  // The gains matter: the same plates compared without them (every gain taken as 1).
+  // The gains matter: the same plates compared without them (every gain taken as 1) ...
   PlateFrame no_gain = f;
   for (Plate& p : no_gain.witness_plates) p.gain = 1.0;
   no_gain.main_plate.gain = 1.0;
   const Result n = run(no_gain, "t = 4 s, gains ignored");
   EXPECT_LT(n.refined.front[1] + n.refined.behind[1], r.refined.front[1] + r.refined.behind[1]);
+  // ... and the witnesses' gains unknown: estimated from the frame against the main camera's.
+  PlateFrame unknown = f;
+  for (Plate& p : unknown.witness_plates) p.gain = 0.0;
+  const Result e = run(unknown, "t = 4 s, witness gains estimated");
+  ASSERT_EQ(e.stats.gains_estimated.size(), f.witness_plates.size());
+  int measured = 0;
+  for (size_t c = 0; c < f.witness_plates.size(); ++c) {
+    std::printf("  %s: gain %.4f estimated from %d points (true %.4f)\n",
+                e.stats.gains_estimated[c].c_str(), e.stats.witness_gains[c],
+                e.stats.gain_samples[c], f.witness_plates[c].gain);
+    if (e.stats.gain_samples[c] < 200) continue;  // facing the actor's back: hardly used
+    ++measured;
+    EXPECT_NEAR(e.stats.witness_gains[c], f.witness_plates[c].gain, 0.01) << c;
+  }
+  EXPECT_GE(measured, 4);
+  // Measured 99.48 % in front / 99.78 % behind (given gains: 99.56 % / 99.77 %): a regression
+  // bound, the goal itself is asserted with the studio's gains above.
+  EXPECT_GE(e.refined.front[1], 0.994);
+  EXPECT_GE(e.refined.behind[1], 0.995);
 }
 
 // t = 7 s, the hardest of nine frames for the hull (turning, an upper arm against the torso

@@ -176,6 +176,10 @@ void RefineOptions::validate() const {
     bad("visibility_m", "must be a finite value >= 0 (got " + num(visibility_m) + ")");
   if (!(margin > 0) || !(margin <= 1))
     bad("margin", "must be in (0, 1] (got " + num(margin) + ")");
+  if (!(veto > 0) || !std::isfinite(veto))
+    bad("veto", "must be a finite value > 0 (got " + num(veto) + ")");
+  if (!(veto_m >= 0) || !(veto_m <= visibility_m))
+    bad("veto_m", "must be in [0, visibility_m] (got " + num(veto_m) + ")");
   if (threads < 0) bad("threads", "must be >= 0 (got " + std::to_string(threads) + ")");
 }
 
@@ -239,9 +243,12 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
   long long pixels = 0, inconsistent = 0, moved = 0;
 
   // Cost of the point X for the plate colour c: mean of the best_of smallest colour distances
-  // over the witnesses that can see X; +inf when fewer see it.
+  // over the witnesses that can see X; +inf when fewer see it. A witness that has X on its own
+  // hull surface (within veto_m) sees X itself if X is matter (the hull holds all of it, so
+  // nothing can hide X from it): its disagreement beyond 'veto' rules X out.
   auto cost = [&](const Eigen::Vector3d& X, const float* c) {
     float d[32];
+    double vetoed = 0;
     int n = 0;
     for (int i = 0; i < nw && n < 32; ++i) {
       const Witness& w = witnesses[i];
@@ -255,13 +262,16 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
       if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
       float cw[3];
       if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
-      d[n++] = colourDistance(c, cw);
+      d[n] = colourDistance(c, cw);
+      if (q.z() <= front + options.veto_m && d[n] > options.veto)
+        vetoed = std::max(vetoed, static_cast<double>(d[n]));
+      ++n;
     }
     if (n < options.best_of) return kInf;
     std::partial_sort(d, d + options.best_of, d + n);
     double s = 0;
     for (int i = 0; i < options.best_of; ++i) s += d[i];
-    return s / options.best_of;
+    return std::max(s / options.best_of, vetoed);
   };
 
 #pragma omp parallel for schedule(dynamic, 4) num_threads(threads) reduction(+ : pixels, inconsistent, moved)

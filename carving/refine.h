@@ -6,8 +6,11 @@
 // hull entry backwards (inside the hull only) are scored by the colour agreement of the depth
 // camera's plate with the witness plates at the candidate's projections (linear light, each
 // plate divided by its camera's gain), the witnesses that cannot see the candidate (it lies far
-// behind their own hull surface) left out. The hull depth stays where it is photo-consistent or
-// where nothing deeper is decisively better. Conventions: docs/conventions.md.
+// behind their own hull surface) left out, and a witness that must see it (it lies on that
+// witness' hull surface) vetoing it when it disagrees. The hull depth stays where it is
+// photo-consistent or where nothing deeper is decisively better; the nearest consistent
+// candidate wins (the best-scoring one pushes pixels behind the surface: measured).
+// Conventions: docs/conventions.md.
 #include <string>
 #include <vector>
 
@@ -29,6 +32,12 @@ struct RefineOptions {
   // A witness sees a candidate when it lies at most this far behind the witness' own hull
   // surface at its projection (the hull's concavities hide the true surface by up to this).
   double visibility_m = 0.22;
+  // A witness that has the candidate on its own hull surface (at most veto_m behind it) would
+  // see it if it were matter (the hull holds all of it); its colour distance above 'veto' rules
+  // the candidate out. This is what carves the air of a same-coloured crease that the best
+  // two witnesses agree on.
+  double veto = 0.3;
+  double veto_m = 0.05;
   // A deeper candidate replaces the hull entry only when its cost is below 'agree' and below
   // the entry's cost times 'margin'.
   double margin = 0.5;

@@ -401,7 +401,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     const RefineOptions& r = m.options.refine;
     m.config["refine"] = {{"search_m", r.search_m}, {"step_m", r.step_m}, {"agree", r.agree},
                           {"best_of", r.best_of}, {"visibility_m", r.visibility_m},
-                          {"margin", r.margin}};
+                          {"veto", r.veto}, {"veto_m", r.veto_m}, {"margin", r.margin}};
   }
 }
 

@@ -121,7 +121,8 @@ Result run(const PlateFrame& f, const char* label) {
 
 // t = 4 s, the frame of item 1 (walking along the back of the stage, seen from the side): the
 // hull puts 1.6 % of the actor pixels more than 10 cm in front (the creases between arms and
-// torso and at the hips, that every silhouette contains). Photo-consistency takes the goal.
+// torso and at the hips, that every silhouette contains). Photo-consistency takes the goal:
+// measured 99.68 % in front, 99.83 % behind at 10 cm.
 TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
   const PlateFrame f = makePlateFrame(4.0);
   const Result r = run(f, "t = 4 s");
@@ -154,25 +155,31 @@ TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
     EXPECT_NEAR(e.stats.witness_gains[c], f.witness_plates[c].gain, 0.01) << c;
   }
   EXPECT_GE(measured, 4);
-  // Measured 99.48 % in front / 99.78 % behind (given gains: 99.56 % / 99.77 %): a regression
-  // bound, the goal itself is asserted with the studio's gains above.
-  EXPECT_GE(e.refined.front[1], 0.994);
+  // Measured 99.61 % in front / 99.87 % behind (given gains: 99.68 % / 99.83 %).
+  EXPECT_GE(e.refined.front[1], 0.995);
   EXPECT_GE(e.refined.behind[1], 0.995);
 }
 
-// t = 7 s, the hardest of nine frames for the hull (turning, an upper arm against the torso
-// beside the backpack, 8.5 % of the pixels more than 10 cm in front): the red sleeve in front of
-// the red shirt and the dark legs side by side are the same colour in every witness, so the air
-// in their crease is photo-consistent too and stays. Measured: 91.46 % -> 94.60 % at 10 cm in
-// front; asserted as a regression bound, with behind kept >= 99.5 %.
-TEST(RefineDepth, ImprovesTheHardestFrameWithoutPushingBehind) {
-  const PlateFrame f = makePlateFrame(7.0);
-  const Result r = run(f, "t = 7 s");
-  EXPECT_GE(r.refined.front[1], 0.94);
-  EXPECT_GE(r.refined.front[1], r.hull.front[1] + 0.025);
-  EXPECT_GE(r.refined.behind[1], 0.995);
-  EXPECT_GE(r.refined.front[2], r.hull.front[2]);
-  EXPECT_GE(r.refined.behind[2], 0.998);
+// The hardest of nine frames for the hull: t = 7 s (turning, an upper arm against the torso
+// beside the backpack, 8.5 % of the pixels more than 10 cm in front) and t = 2.5 s (7.0 %). The
+// red sleeve in front of the red shirt and the dark legs side by side are the same colour in
+// every witness, so much of the air in their creases is photo-consistent too and stays.
+// Measured at 10 cm in front: t = 7 s 91.46 % -> 95.25 %, t = 2.5 s 93.03 % -> 98.77 %;
+// asserted as regression bounds, with behind kept >= 99.5 %.
+TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
+  struct Case {
+    double time_s, front_10cm;
+  };
+  for (const Case c : {Case{7.0, 0.95}, Case{2.5, 0.985}}) {
+    const PlateFrame f = makePlateFrame(c.time_s);
+    const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
+    const Result r = run(f, label.c_str());
+    EXPECT_GE(r.refined.front[1], c.front_10cm) << label;
+    EXPECT_GE(r.refined.front[1], r.hull.front[1] + 0.035) << label;
+    EXPECT_GE(r.refined.behind[1], 0.995) << label;
+    EXPECT_GE(r.refined.front[2], r.hull.front[2]) << label;
+    EXPECT_GE(r.refined.behind[2], 0.998) << label;
+  }
 }
 
 TEST(RefineDepth, RejectsBadOptionsAndInputs) {

@@ -7,9 +7,10 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
-#include <optional>
-
+#include <string>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -58,7 +59,8 @@ constexpr int kVisibilityBlock = 4;
 
 // Per block of kVisibilityBlock^2 witness pixels, a depth no farther than the hull's first
 // surface at any of its pixels: the hull depth of the scaled-down camera (silhouette max-pooled,
-// so every block that holds an inside pixel is cast), then the minimum over each 3x3 blocks.
+// so every block that holds an inside pixel is cast), then the minimum over each block's 3x3
+// neighbourhood (the scaled rays are not the full-size ones).
 cv::Mat visibilityMap(const Carver& carver, const VisualHull& hull, const RigCamera& rc,
                       const cv::Mat& mask) {
   const int b = kVisibilityBlock;

@@ -24,6 +24,7 @@ struct CarveArgs {
   int threads = 0;
   double point_spacing_m = 0;
   bool depth_everywhere = false;
+  bool refine = false;
   bool json = false;
   bool quiet = false;
 };
@@ -76,6 +77,8 @@ int runCarve(const CarveArgs& a) {
   o.depth_camera = a.depth_camera;
   o.carve_cameras = splitNames(a.cameras);
   o.depth_inside_silhouette = !a.depth_everywhere;
+  o.refine_depth = a.refine;
+  o.refine.threads = a.threads;
   o.points.spacing_m = a.point_spacing_m;
   o.validate();
 
@@ -118,6 +121,7 @@ int runCarve(const CarveArgs& a) {
                         {"failed", failed},
                         {"dropped", dropped},
                         {"depth_camera", job.depthCamera()},
+                        {"refine", o.refine_depth},
                         {"carve_cameras", job.carveCameras()},
                         {"ms", s.ms},
                         {"fps", fps}};
@@ -158,6 +162,9 @@ Runner addCarveCommand(CLI::App& app) {
   cmd->add_option("--cameras", a->cameras, "Carving cameras a,b,c (default: every witness)");
   cmd->add_flag("--depth-everywhere", a->depth_everywhere,
                 "Depth wherever a ray meets the hull, not only inside the depth camera's silhouette");
+  cmd->add_flag("--refine", a->refine,
+                "Also write depth_refined/: depth beyond the visual hull by photo-consistency of "
+                "the plates (needs cams/<cam>/%06d.png, also with --masks)");
   cmd->add_option("--point-spacing", a->point_spacing_m,
                   "Point cloud: also sample faces this densely, metres (0 = mesh vertices)")
       ->capture_default_str();

@@ -23,6 +23,7 @@
 
 #include "carving/hull.h"
 #include "carving/keyer.h"
+#include "carving/refine.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
@@ -237,6 +238,34 @@ void BM_Depth(benchmark::State& state) {
     benchmark::DoNotOptimize(d.data);
   }
 }
+// Depth beyond the hull (refine.h) on the same frame: the plates (every gain 1 in this render),
+// the hull depth of BM_Depth; includes the witnesses' quarter-size visibility maps. The first
+// call (ray tables of those quarter-size lenses, once per lens) is left out.
+void BM_RefineDepth(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  CarveCase& c = carveCase(voxel, threads);
+  const Frame& f = frame();
+  const cv::Mat hull_depth = c.carver->depth(c.hull, f.main, f.main_truth);
+  std::vector<Plate> plates;
+  for (const cv::Mat& p : f.plates) plates.push_back(Plate{p, 1.0});
+  RefineOptions o;
+  o.threads = threads;
+  refineDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth, plates,
+              f.truth_masks, o);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    RefineStats stats;
+    cv::Mat d = refineDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth,
+                            plates, f.truth_masks, o, &stats);
+    char extra[128];
+    std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"pixels\":%lld,\"inconsistent\":%lld,\"moved\":%lld",
+                  voxel, stats.pixels, stats.inconsistent, stats.moved);
+    record("4r_refine_" + voxelLabel(voxel) + threadKey(threads), "main_depth_refined",
+           "1920x1080@" + voxelLabel(voxel), sw, -1, threads, extra);
+    benchmark::DoNotOptimize(d.data);
+  }
+}
 void BM_Mesh(benchmark::State& state) {
   const double voxel = state.range(0) / 1000.0;
   const int threads = benchThreads(state);
@@ -344,6 +373,7 @@ BENCHMARK(BM_KeyWitness)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMilliseco
 BENCHMARK(BM_KeyMain)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_Carve)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_Depth)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
+BENCHMARK(BM_RefineDepth)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_Mesh)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_DenseCarve)->ArgsProduct({{10}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 

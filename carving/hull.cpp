@@ -1,6 +1,7 @@
-// Visual hull: coarse-to-fine carving of a sparse cell hierarchy, per-pixel hull depth for any
-// camera, and the hull surface as a mesh. See carving/hull.h for the contract and
-// carving/detail/hull_camera.h for the projection and the footprint test.
+// Visual hull: coarse-to-fine carving of a sparse cell hierarchy and the exact point test (the
+// per-pixel hull depth for any camera is in hull_depth.cpp, the surface mesh in hull_mesh.cpp).
+// See carving/hull.h for the contract and carving/detail/hull_camera.h for the projection and
+// the footprint test.
 //
 // Carving. Level l cells have edge voxel * 2^l. Top cells (~32 cm) start with every used camera
 // undecided. A parent that is undecided ("mixed") is split into its 8 children, and each child
@@ -30,6 +31,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "carving/detail/carver_impl.h"
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
@@ -40,16 +42,18 @@ using detail::CameraModel;
 using detail::CamState;
 using detail::FrameCam;
 using detail::HullData;
+using detail::BlockOut;
+using detail::Cell;
+using detail::Grid;
+using detail::RayTable;
+using detail::kRefineIterations;
+using detail::kSamplesPerVoxel;
+using detail::threadCount;
 
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kTopCellsPerAxis = 16;  // the top level has at most this many cells per axis
-// Along a ray inside a surface voxel: samples every voxel / kSamplesPerVoxel, then bisection
-// between the last outside and the first inside sample (the surface to 1/32 of the sampling
-// step: 0.08 mm at 5 mm cells). Mesh edges use the same bisection.
-constexpr int kSamplesPerVoxel = 2;
-constexpr int kRefineIterations = 5;
 
 std::string num(double v) {
   char buf[64];
@@ -57,7 +61,6 @@ std::string num(double v) {
   return buf;
 }
 
-int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
 double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
@@ -271,14 +274,6 @@ FrameCam makeFrameCam(const cv::Mat& mask) {
 // ---------------------------------------------------------------------------------------------
 namespace {
 
-// The finest grid over the volume and the number of levels above it.
-struct Grid {
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
-  double voxel = 0;
-  Eigen::Vector3i dims = Eigen::Vector3i::Zero();
-  int top_level = 0;
-};
-
 Grid makeGrid(const HullOptions& options) {
   Grid g;
   g.origin = options.volume.min();
@@ -290,15 +285,6 @@ Grid makeGrid(const HullOptions& options) {
   while (((largest + (1 << g.top_level) - 1) >> g.top_level) > kTopCellsPerAxis) ++g.top_level;
   return g;
 }
-
-// A cell during carving: index at its level, the cameras known to see it wholly outside /
-// inside, and the cameras still undecided.
-struct Cell {
-  std::uint16_t x = 0, y = 0, z = 0;
-  std::uint8_t level = 0;
-  std::uint8_t n_out = 0, n_in = 0;
-  std::uint32_t mixed = 0;
-};
 
 // Lattice of a parent's 8 children: 3 x 3 x 3 points, index (iz * 3 + iy) * 3 + ix.
 struct ChildLattice {
@@ -331,16 +317,6 @@ struct CarveContext {
   const std::vector<FrameCam>* frames;
   Grid grid;
   int k = 0, min_views = 2;
-};
-
-struct BlockOut {
-  std::vector<Cell> mixed, inside;
-  long long tested = 0;
-  void clear() {
-    mixed.clear();
-    inside.clear();
-    tested = 0;
-  }
 };
 
 // Footprint state of one child in one camera from its projected corners.
@@ -545,44 +521,12 @@ HullCell toHullCell(const Cell& c) {
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
-// Carver state
+// Carver state (carving/detail/carver_impl.h)
 // ---------------------------------------------------------------------------------------------
-namespace {
-
-// What depth() needs of one lens, built on its first use: per-pixel rays (ideal normalized
-// (x, y), NaN where not invertible) and the projection model (its pose set per call).
-struct RayTable {
-  Camera camera;
-  std::vector<float> xy;
-  CameraModel model;
-};
-
-bool sameLens(const Camera& a, const Camera& b) {
-  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
-         a.cx == b.cx && a.cy == b.cy && a.skew == b.skew && a.dist.k1 == b.dist.k1 &&
-         a.dist.k2 == b.dist.k2 && a.dist.p1 == b.dist.p1 && a.dist.p2 == b.dist.p2 &&
-         a.dist.k3 == b.dist.k3;
-}
-
-}  // namespace
-
-struct Carver::Impl {
-  std::vector<RigCamera> cameras;
-  std::shared_ptr<const std::vector<CameraModel>> models;
-  HullOptions options;
-  Grid grid;
-  std::shared_ptr<const HullData> last;
-  std::vector<BlockOut> blocks;  // reused between frames: carving allocates nothing when warm
-
-  mutable std::mutex rays_mutex;
-  mutable std::vector<std::shared_ptr<const RayTable>> rays;
-  std::shared_ptr<const RayTable> rayTable(const Camera& camera, int threads) const;
-};
-
 std::shared_ptr<const RayTable> Carver::Impl::rayTable(const Camera& camera, int threads) const {
   std::lock_guard<std::mutex> lock(rays_mutex);
   for (const auto& table : rays)
-    if (sameLens(table->camera, camera)) return table;
+    if (detail::sameLens(table->camera, camera)) return table;
   auto table = std::make_shared<RayTable>();
   table->camera = camera;
   table->xy.assign(2 * static_cast<size_t>(camera.width) * camera.height,
@@ -881,586 +825,6 @@ bool Carver::inside(const Eigen::Vector3d& p_world) const {
 
 bool Carver::inside(const VisualHull& hull, const Eigen::Vector3d& p_world) const {
   return hull.data && hull.data->inside(p_world.data());
-}
-
-// ---------------------------------------------------------------------------------------------
-// Depth: first hull surface along each pixel's ray
-// ---------------------------------------------------------------------------------------------
-namespace {
-
-// Amanatides & Woo (1987) traversal of a grid of unit cells, p(t) = p0 + t dir.
-struct Dda {
-  int i[3], step[3];
-  double t_max[3], t_delta[3];
-  void init(const double* p0, const double* dir, double t, const int* lo, const int* hi) {
-    for (int a = 0; a < 3; ++a) {
-      const double p = p0[a] + t * dir[a];
-      const int c = std::clamp(detail::floorToInt(std::clamp(p, -1e7, 1e7)), lo[a], hi[a] - 1);
-      i[a] = c;
-      if (dir[a] > 0) {
-        step[a] = 1;
-        t_delta[a] = 1.0 / dir[a];
-        t_max[a] = (c + 1 - p0[a]) / dir[a];
-      } else if (dir[a] < 0) {
-        step[a] = -1;
-        t_delta[a] = -1.0 / dir[a];
-        t_max[a] = (c - p0[a]) / dir[a];
-      } else {
-        step[a] = 0;
-        t_delta[a] = kInf;
-        t_max[a] = kInf;
-      }
-    }
-  }
-  double exitT() const { return std::min(t_max[0], std::min(t_max[1], t_max[2])); }
-  // Steps into the next cell; false when it leaves [lo, hi).
-  bool advance(const int* lo, const int* hi) {
-    const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2)
-                                      : (t_max[1] < t_max[2] ? 1 : 2);
-    i[a] += step[a];
-    t_max[a] += t_delta[a];
-    return i[a] >= lo[a] && i[a] < hi[a];
-  }
-};
-
-struct RayQuery {
-  const HullData* h;
-  double o[3], d[3];  // world: point(t) = o + t d, t = depth along the camera's axis
-  double go[3], gd[3];  // the same in finest-voxel units from the grid origin
-  double step_t;        // sampling step inside surface voxels, in t
-  // The ray in each witness camera's frame, q(t) = qo + t qd: qo per call, qd per pixel and
-  // camera on first use (bit set in qd_valid).
-  const double (*qo)[3];
-  mutable double qd[detail::kMaxCameras][3];
-  mutable std::uint32_t qd_valid = 0;
-
-  void setDirection(const Eigen::Vector3d& dir) {
-    for (int a = 0; a < 3; ++a) {
-      d[a] = dir[a];
-      gd[a] = dir[a] / h->voxel;
-    }
-    qd_valid = 0;
-  }
-  // The k-of-n rule at o + t d, as HullData::insideGiven, with the camera coordinates
-  // interpolated along the ray.
-  bool insideAt(double t, const detail::SurfaceInfo& info) const {
-    int n_out = info.n_out, views = info.n_out + info.n_in;
-    if (n_out > h->k) return false;
-    std::uint32_t mixed = info.mixed;
-    while (mixed) {
-      const int c = __builtin_ctz(mixed);
-      mixed &= mixed - 1;
-      const CameraModel& cam = (*h->cameras)[c];
-      if (!((qd_valid >> c) & 1)) {
-        qd[c][0] = cam.R[0] * d[0] + cam.R[1] * d[1] + cam.R[2] * d[2];
-        qd[c][1] = cam.R[3] * d[0] + cam.R[4] * d[1] + cam.R[5] * d[2];
-        qd[c][2] = cam.R[6] * d[0] + cam.R[7] * d[1] + cam.R[8] * d[2];
-        qd_valid |= 1u << c;
-      }
-      const double q[3] = {qo[c][0] + t * qd[c][0], qo[c][1] + t * qd[c][1],
-                           qo[c][2] + t * qd[c][2]};
-      const CamState s = detail::cameraPointState(cam, h->frames[c], q);
-      if (s == detail::kOut) {
-        if (++n_out > h->k) return false;
-        ++views;
-      } else if (s == detail::kIn) {
-        ++views;
-      }
-    }
-    return views >= h->min_views;
-  }
-
-  // Where the ray enters the hull between t_out (outside) and t_in (inside), k = 0, without
-  // bisection: in each undecided camera that sees t_out outside, the ray's image moves from an
-  // outside pixel into a neighbouring inside one and crosses their shared edge at a fraction s
-  // of the way (the image of a sub-voxel segment is straight to far below a pixel); the hull
-  // starts where the last camera lets it in. False (bisect instead) when some camera's image
-  // jumps diagonally or by more than a pixel, leaves the image, or k > 0.
-  bool crossing(const detail::SurfaceInfo& info, double t_out, double t_in, double* hit) const {
-    if (h->k != 0) return false;
-    double t_hit = t_out;
-    std::uint32_t mixed = info.mixed;
-    while (mixed) {
-      const int c = __builtin_ctz(mixed);
-      mixed &= mixed - 1;
-      const CameraModel& cam = (*h->cameras)[c];
-      const detail::FrameCam& frame = h->frames[c];
-      const double qa[3] = {qo[c][0] + t_out * qd[c][0], qo[c][1] + t_out * qd[c][1],
-                            qo[c][2] + t_out * qd[c][2]};
-      const double qb[3] = {qo[c][0] + t_in * qd[c][0], qo[c][1] + t_in * qd[c][1],
-                            qo[c][2] + t_in * qd[c][2]};
-      double ua, va, ub, vb;
-      if (!cam.project(qa, ua, va) || !cam.project(qb, ub, vb)) return false;
-      const int iua = detail::floorToInt(ua + 0.5), iva = detail::floorToInt(va + 0.5);
-      const int iub = detail::floorToInt(ub + 0.5), ivb = detail::floorToInt(vb + 0.5);
-      if (iua < 0 || iva < 0 || iub < 0 || ivb < 0 || iua >= cam.width || iub >= cam.width ||
-          iva >= cam.height || ivb >= cam.height)
-        return false;
-      if (frame.insidePixel(iua, iva)) continue;  // already inside at t_out
-      double s;
-      if (iva == ivb && std::abs(iua - iub) == 1)
-        s = (0.5 * (iua + iub) - ua) / (ub - ua);
-      else if (iua == iub && std::abs(iva - ivb) == 1)
-        s = (0.5 * (iva + ivb) - va) / (vb - va);
-      else
-        return false;
-      t_hit = std::max(t_hit, t_out + std::clamp(s, 0.0, 1.0) * (t_in - t_out));
-    }
-    *hit = t_hit;
-    return true;
-  }
-
-  // The hull's first point in a surface voxel's segment [ta, tb] (ta known outside): samples
-  // at step_t, then bisection between the last outside and the first inside sample.
-  bool searchVoxel(const detail::SurfaceInfo& info, double ta, double tb, double* hit) const {
-    const int n = std::max(1, static_cast<int>(std::ceil((tb - ta) / step_t)));
-    const double step = (tb - ta) / n;
-    double prev = ta;
-    for (int s = 1; s <= n; ++s) {
-      const double t = s == n ? tb : ta + s * step;
-      if (insideAt(t, info)) {
-        if (crossing(info, prev, t, hit)) return true;
-        double out = prev, in = t;
-        for (int it = 0; it < kRefineIterations; ++it) {
-          const double mid = 0.5 * (out + in);
-          (insideAt(mid, info) ? in : out) = mid;
-        }
-        *hit = 0.5 * (out + in);
-        return true;
-      }
-      prev = t;
-    }
-    return false;
-  }
-
-  // Walks the voxels of a mixed brick over [ta, tb].
-  bool searchBrick(const detail::Brick& brick, const int* brick_cell, double ta, double tb,
-                   double* hit) const {
-    int lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = (brick_cell[a] + h->brick_min[a]) << detail::kBrickShift;
-      hi[a] = lo[a] + detail::kBrickEdge;
-    }
-    Dda dda;
-    dda.init(go, gd, ta, lo, hi);
-    double t = ta;
-    while (t < tb) {
-      const double te = std::min(dda.exitT(), tb);
-      if (te > t) {
-        const int bit = ((dda.i[2] & 3) << 4) | ((dda.i[1] & 3) << 2) | (dda.i[0] & 3);
-        const std::uint64_t m = std::uint64_t{1} << bit;
-        if (brick.inside & m) {
-          *hit = t;
-          return true;
-        }
-        if (brick.surface & m) {
-          const std::uint32_t idx = brick.offset + __builtin_popcountll(brick.surface & (m - 1));
-          if (searchVoxel(h->surface_info[idx], t, te, hit)) return true;
-        }
-        t = te;
-      }
-      if (!dda.advance(lo, hi)) break;
-    }
-    return false;
-  }
-
-  // Depth (t) of the first hull point along the ray at or beyond t_start; +inf when it misses.
-  double run(double t_start) const {
-    double t0 = t_start, t1 = kInf;
-    int lo[3] = {0, 0, 0}, hi[3];
-    double bo[3], bd[3];
-    for (int a = 0; a < 3; ++a) {
-      hi[a] = h->brick_dims[a];
-      bo[a] = go[a] / detail::kBrickEdge - h->brick_min[a];
-      bd[a] = gd[a] / detail::kBrickEdge;
-      if (bd[a] == 0.0) {
-        if (bo[a] < 0 || bo[a] > hi[a]) return kInf;
-        continue;
-      }
-      double ta = -bo[a] / bd[a], tb = (hi[a] - bo[a]) / bd[a];
-      if (ta > tb) std::swap(ta, tb);
-      t0 = std::max(t0, ta);
-      t1 = std::min(t1, tb);
-    }
-    if (!(t0 < t1)) return kInf;
-    Dda dda;
-    dda.init(bo, bd, t0, lo, hi);
-    double t = t0;
-    while (t < t1) {
-      const double te = std::min(dda.exitT(), t1);
-      if (te > t) {
-        const std::int32_t b =
-            h->brick_index[(static_cast<size_t>(dda.i[2]) * hi[1] + dda.i[1]) * hi[0] + dda.i[0]];
-        if (b == detail::kBrickFull) return t;
-        double hit;
-        if (b >= 0 && searchBrick(h->bricks[b], dda.i, t, te, &hit)) return hit;
-        t = te;
-      }
-      if (!dda.advance(lo, hi)) break;
-    }
-    return kInf;
-  }
-};
-
-}  // namespace
-
-namespace {
-
-constexpr int kBoundShift = 2;  // the depth lower bound is kept per 4 x 4 pixels
-
-// A lower bound of the hull's depth per 4 x 4 pixel block of the camera: super-bricks (4^3
-// bricks) that hold any kept cell, projected (8 corners, distortion pad) with the nearest
-// corner's depth. Every hull point seen at a pixel lies in such a super-brick whose footprint
-// covers the pixel, so no ray starts past its first hull point; +inf blocks see no hull at
-// all. Returns false when some super-brick is not wholly in front of the camera (no bound).
-bool depthLowerBound(const HullData& h, const CameraModel& cam, cv::Mat& bound) {
-  const int w = (cam.width + 3) >> kBoundShift, ht = (cam.height + 3) >> kBoundShift;
-  bound.create(ht, w, CV_32FC1);
-  bound.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
-  constexpr int kGroup = 4;  // bricks per super-brick edge
-  const Eigen::Vector3i bd = h.brick_dims;
-  const Eigen::Vector3i sd = (bd.array() + kGroup - 1) / kGroup;
-  std::vector<std::uint8_t> occupied(static_cast<size_t>(sd.x()) * sd.y() * sd.z(), 0);
-  for (int z = 0; z < bd.z(); ++z)
-    for (int y = 0; y < bd.y(); ++y)
-      for (int x = 0; x < bd.x(); ++x)
-        if (h.brick_index[(static_cast<size_t>(z) * bd.y() + y) * bd.x() + x] !=
-            detail::kBrickEmpty)
-          occupied[(static_cast<size_t>(z / kGroup) * sd.y() + y / kGroup) * sd.x() + x / kGroup] = 1;
-  const double edge = h.voxel * detail::kBrickEdge * kGroup;
-  const Eigen::Vector3d base =
-      h.origin + h.voxel * detail::kBrickEdge * h.brick_min.cast<double>();
-  for (int z = 0; z < sd.z(); ++z)
-    for (int y = 0; y < sd.y(); ++y)
-      for (int x = 0; x < sd.x(); ++x) {
-        if (!occupied[(static_cast<size_t>(z) * sd.y() + y) * sd.x() + x]) continue;
-        double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf, z_near = kInf;
-        double xmin = kInf, xmax = -kInf, ymin = kInf, ymax = -kInf;
-        for (int c = 0; c < 8; ++c) {
-          const Eigen::Vector3d p =
-              base + edge * Eigen::Vector3d(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2));
-          double q[3], u, v;
-          cam.toCamera(p.data(), q);
-          if (!cam.project(q, u, v)) return false;
-          z_near = std::min(z_near, q[2]);
-          umin = std::min(umin, u);
-          umax = std::max(umax, u);
-          vmin = std::min(vmin, v);
-          vmax = std::max(vmax, v);
-          xmin = std::min(xmin, q[0] / q[2]);
-          xmax = std::max(xmax, q[0] / q[2]);
-          ymin = std::min(ymin, q[1] / q[2]);
-          ymax = std::max(ymax, q[1] / q[2]);
-        }
-        const double dx = xmax - xmin, dy = ymax - ymin;
-        const double pad = cam.pad_per_diam2 * (dx * dx + dy * dy) + 1.0;
-        const int u0 = std::max(0, detail::floorToInt(std::max(umin - pad, -1e7) + 0.5));
-        const int u1 = std::min(cam.width - 1, detail::floorToInt(std::min(umax + pad, 1e7) + 0.5));
-        const int v0 = std::max(0, detail::floorToInt(std::max(vmin - pad, -1e7) + 0.5));
-        const int v1 = std::min(cam.height - 1, detail::floorToInt(std::min(vmax + pad, 1e7) + 0.5));
-        const float zf = static_cast<float>(z_near);
-        for (int bv = v0 >> kBoundShift; bv <= v1 >> kBoundShift && v0 <= v1; ++bv) {
-          float* row = bound.ptr<float>(bv);
-          for (int bu = u0 >> kBoundShift; bu <= u1 >> kBoundShift && u0 <= u1; ++bu)
-            row[bu] = std::min(row[bu], zf);
-        }
-      }
-  return true;
-}
-
-}  // namespace
-
-cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
-                      const cv::Mat& silhouette) const {
-  const Camera& cam = camera.camera;
-  cam.validate();
-  if (!silhouette.empty()) {
-    if (silhouette.type() != CV_8UC1)
-      throw Error("depth: silhouette must be 8-bit single-channel",
-                  ErrorContext{"", cam.name, std::nullopt, "silhouette"});
-    if (silhouette.cols != cam.width || silhouette.rows != cam.height)
-      throw Error("depth: silhouette is " + std::to_string(silhouette.cols) + "x" +
-                      std::to_string(silhouette.rows) + " but the camera is " +
-                      std::to_string(cam.width) + "x" + std::to_string(cam.height),
-                  ErrorContext{"", cam.name, std::nullopt, "silhouette"});
-  }
-  cv::Mat out(cam.height, cam.width, CV_32FC1);
-  if (!hull.data || !hull.data->hasCells()) {
-    out.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
-    return out;
-  }
-  const int threads = threadCount(impl_->options.threads);
-  const std::shared_ptr<const RayTable> table = impl_->rayTable(cam, threads);
-  const HullData& h = *hull.data;
-  CameraModel model = table->model;
-  {
-    const Pose T_cam_world = camera.T_world_cam.inverse();
-    for (int r = 0; r < 3; ++r) {
-      for (int col = 0; col < 3; ++col) model.R[r * 3 + col] = T_cam_world.linear()(r, col);
-      model.t[r] = T_cam_world.translation()[r];
-    }
-  }
-  cv::Mat bound;
-  const bool bounded = depthLowerBound(h, model, bound);
-  const Eigen::Matrix3d R = camera.T_world_cam.linear();
-  const Eigen::Vector3d centre = camera.T_world_cam.translation();
-  const double sample_m = h.voxel / kSamplesPerVoxel;
-  // The camera centre in every witness camera's frame (the rays' common origin there).
-  double qo[detail::kMaxCameras][3] = {};
-  for (size_t c = 0; c < h.cameras->size(); ++c) (*h.cameras)[c].toCamera(centre.data(), qo[c]);
-#pragma omp parallel for schedule(dynamic, 4) num_threads(threads)
-  for (int v = 0; v < cam.height; ++v) {
-    float* row = out.ptr<float>(v);
-    std::fill(row, row + cam.width, std::numeric_limits<float>::infinity());
-    const std::uint8_t* sil = silhouette.empty() ? nullptr : silhouette.ptr<std::uint8_t>(v);
-    const float* xy = table->xy.data() + 2 * static_cast<size_t>(v) * cam.width;
-    const float* lower = bounded ? bound.ptr<float>(v >> kBoundShift) : nullptr;
-    RayQuery q;
-    q.h = &h;
-    q.qo = qo;
-    for (int a = 0; a < 3; ++a) {
-      q.o[a] = centre[a];
-      q.go[a] = (centre[a] - h.origin[a]) / h.voxel;
-    }
-    for (int u = 0; u < cam.width; ++u) {
-      if (sil && sil[u] <= 127) continue;
-      const double t_start = lower ? lower[u >> kBoundShift] : 0.0;
-      if (t_start == kInf) continue;  // no hull near this pixel's ray
-      const float x = xy[2 * u], y = xy[2 * u + 1];
-      if (std::isnan(x)) continue;
-      const Eigen::Vector3d d = R * Eigen::Vector3d(x, y, 1.0);
-      q.setDirection(d);
-      q.step_t = sample_m / d.norm();
-      row[u] = static_cast<float>(q.run(t_start));
-    }
-  }
-  return out;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Mesh: surface nets over the surface voxels
-// ---------------------------------------------------------------------------------------------
-namespace {
-
-constexpr int kSmoothPairs = 3;  // Taubin (1995) lambda/mu pairs: smooths without shrinking
-constexpr double kTaubinLambda = 0.5, kTaubinMu = -0.53;
-
-// Corner c = dx + 2 dy + 4 dz of a voxel; lattice of a brick: 5^3 points.
-int latticeIndex(int lx, int ly, int lz) { return (lz * 5 + ly) * 5 + lx; }
-
-struct MeshBuilder {
-  const HullData& h;
-  int threads;
-  std::vector<std::int8_t> sign;     // per brick, 125 lattice signs (-1 unknown, 0 out, 1 in)
-  std::vector<std::int32_t> brick_of;  // surface voxel -> brick
-  std::vector<std::uint8_t> code;    // surface voxel -> corner inside bits
-  std::vector<Eigen::Vector3d> vertex;
-
-  Eigen::Vector3d latticePoint(int x, int y, int z) const {
-    return h.origin + h.voxel * Eigen::Vector3d(x, y, z);
-  }
-  bool cornerInside(std::int64_t s, int c) const {
-    return (code[s] >> c) & 1;
-  }
-
-  // Lattice signs from the exact test with every used camera (the same answer for a point
-  // shared by two bricks); the volume's boundary is outside, which closes the hull there.
-  void computeSigns() {
-    const int n_bricks = static_cast<int>(h.bricks.size());
-    sign.assign(static_cast<size_t>(n_bricks) * 125, -1);
-    brick_of.assign(h.surface_info.size(), -1);
-    code.assign(h.surface_info.size(), 0);
-    const std::uint32_t all = h.usedMask();
-#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
-    for (int b = 0; b < n_bricks; ++b) {
-      const detail::Brick& brick = h.bricks[b];
-      const int count = __builtin_popcountll(brick.surface);
-      std::int8_t* bs = sign.data() + static_cast<size_t>(b) * 125;
-      for (int k = 0; k < count; ++k) {
-        const std::int64_t s = brick.offset + k;
-        brick_of[s] = b;
-        const auto& v = h.surface_voxel[s];
-        std::uint8_t bits = 0;
-        for (int c = 0; c < 8; ++c) {
-          const int gx = v.x() + (c & 1), gy = v.y() + ((c >> 1) & 1), gz = v.z() + (c >> 2);
-          const int li = latticeIndex(gx - (v.x() & ~3), gy - (v.y() & ~3), gz - (v.z() & ~3));
-          if (bs[li] < 0) {
-            const bool boundary = gx <= 0 || gy <= 0 || gz <= 0 || gx >= h.dims.x() ||
-                                  gy >= h.dims.y() || gz >= h.dims.z();
-            const Eigen::Vector3d p = latticePoint(gx, gy, gz);
-            bs[li] = !boundary && h.insideGiven(p.data(), all, 0, 0);
-          }
-          bits |= static_cast<std::uint8_t>(bs[li] << c);
-        }
-        code[s] = bits;
-      }
-    }
-  }
-
-  // Vertex of each voxel the surface crosses: mean of its edges' crossings, each found by
-  // bisection with the voxel's own undecided cameras.
-  void computeVertices() {
-    const std::int64_t n = static_cast<std::int64_t>(h.surface_info.size());
-    vertex.assign(n, Eigen::Vector3d::Zero());
-#pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
-    for (std::int64_t s = 0; s < n; ++s) {
-      if (code[s] == 0 || code[s] == 255) continue;
-      const detail::SurfaceInfo& info = h.surface_info[s];
-      const auto& v = h.surface_voxel[s];
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      int count = 0;
-      for (int c = 0; c < 8; ++c) {
-        for (int a = 0; a < 3; ++a) {
-          const int c2 = c | (1 << a);
-          if (c2 == c || cornerInside(s, c) == cornerInside(s, c2)) continue;
-          Eigen::Vector3d in = latticePoint(v.x() + (c & 1), v.y() + ((c >> 1) & 1), v.z() + (c >> 2));
-          Eigen::Vector3d out =
-              latticePoint(v.x() + (c2 & 1), v.y() + ((c2 >> 1) & 1), v.z() + (c2 >> 2));
-          if (!cornerInside(s, c)) std::swap(in, out);
-          for (int it = 0; it < kRefineIterations; ++it) {
-            const Eigen::Vector3d mid = 0.5 * (in + out);
-            (h.insideGiven(mid.data(), info.mixed, info.n_out, info.n_in) ? in : out) = mid;
-          }
-          sum += 0.5 * (in + out);
-          ++count;
-        }
-      }
-      vertex[s] = sum / count;
-    }
-  }
-
-  bool hasVertex(std::int64_t s) const { return code[s] != 0 && code[s] != 255; }
-
-  // One quad per lattice edge the surface crosses, owned by the voxel at its low corner in the
-  // two other axes; wound counter-clockwise seen from the outside end of the edge.
-  std::vector<Eigen::Vector3i> faces(long long* anomalies) const {
-    const std::int64_t n = static_cast<std::int64_t>(h.surface_info.size());
-    std::vector<std::vector<Eigen::Vector3i>> per_thread(threads);
-    long long bad = 0;
-#pragma omp parallel num_threads(threads) reduction(+ : bad)
-    {
-      std::vector<Eigen::Vector3i>& out = per_thread[omp_get_thread_num()];
-#pragma omp for schedule(static)
-      for (std::int64_t s = 0; s < n; ++s) {
-        if (!hasVertex(s)) continue;
-        const auto& v = h.surface_voxel[s];
-        // Per axis: the edge's two corners and the 4 voxels around it (offsets from v) in
-        // counter-clockwise order seen from +axis.
-        static const int kLow[3] = {6, 5, 3};
-        static const int kAround[3][4][3] = {
-            {{0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {0, 0, 1}},
-            {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}},
-            {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}};
-        for (int a = 0; a < 3; ++a) {
-          const bool low_in = cornerInside(s, kLow[a]), high_in = cornerInside(s, 7);
-          if (low_in == high_in) continue;
-          std::int64_t ids[4];
-          bool ok = true;
-          for (int q = 0; q < 4 && ok; ++q) {
-            const int* o = kAround[a][q];
-            ok = h.voxelKind(v.x() + o[0], v.y() + o[1], v.z() + o[2], &ids[q]) ==
-                     detail::kVoxelSurface &&
-                 hasVertex(ids[q]);
-          }
-          if (!ok) {
-            ++bad;
-            continue;
-          }
-          if (!low_in) std::swap(ids[1], ids[3]);  // outward normal is -axis: reverse
-          // Split along the shorter diagonal.
-          const double d02 = (vertex[ids[0]] - vertex[ids[2]]).squaredNorm();
-          const double d13 = (vertex[ids[1]] - vertex[ids[3]]).squaredNorm();
-          auto tri = [&](int i, int j, int k) {
-            out.emplace_back(static_cast<int>(ids[i]), static_cast<int>(ids[j]),
-                             static_cast<int>(ids[k]));
-          };
-          if (d02 <= d13) {
-            tri(0, 1, 2);
-            tri(0, 2, 3);
-          } else {
-            tri(0, 1, 3);
-            tri(1, 2, 3);
-          }
-        }
-      }
-    }
-    *anomalies = bad;
-    std::vector<Eigen::Vector3i> all;
-    for (auto& f : per_thread) all.insert(all.end(), f.begin(), f.end());
-    return all;
-  }
-};
-
-// Taubin smoothing over the mesh's vertex neighbours.
-void smooth(std::vector<Eigen::Vector3d>& p, const std::vector<Eigen::Vector3i>& faces,
-            int threads) {
-  const int n = static_cast<int>(p.size());
-  std::vector<int> start(n + 1, 0), adj;
-  for (const auto& f : faces)
-    for (int i = 0; i < 3; ++i) start[f[i] + 1] += 2;
-  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
-  adj.resize(start[n]);
-  std::vector<int> fill(start.begin(), start.end() - 1);
-  for (const auto& f : faces)
-    for (int i = 0; i < 3; ++i) {
-      adj[fill[f[i]]++] = f[(i + 1) % 3];
-      adj[fill[f[i]]++] = f[(i + 2) % 3];
-    }
-  std::vector<Eigen::Vector3d> next(n);
-  for (int it = 0; it < 2 * kSmoothPairs; ++it) {
-    const double w = it % 2 == 0 ? kTaubinLambda : kTaubinMu;
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (int i = 0; i < n; ++i) {
-      if (start[i + 1] == start[i]) {
-        next[i] = p[i];
-        continue;
-      }
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (int j = start[i]; j < start[i + 1]; ++j) mean += p[adj[j]];
-      mean /= start[i + 1] - start[i];
-      next[i] = p[i] + w * (mean - p[i]);
-    }
-    p.swap(next);
-  }
-}
-
-}  // namespace
-
-TriangleMesh Carver::mesh(const VisualHull& hull) const {
-  TriangleMesh mesh;
-  if (!hull.data || hull.data->surface_info.empty()) return mesh;
-  MeshBuilder b{*hull.data, threadCount(impl_->options.threads), {}, {}, {}, {}};
-  b.computeSigns();
-  b.computeVertices();
-  long long anomalies = 0;
-  std::vector<Eigen::Vector3i> faces = b.faces(&anomalies);
-  // Keep only the vertices of voxels the surface crosses, in surface order.
-  const std::int64_t n = static_cast<std::int64_t>(b.vertex.size());
-  std::vector<int> id(n, -1);
-  std::vector<Eigen::Vector3d> p;
-  for (std::int64_t s = 0; s < n; ++s)
-    if (b.hasVertex(s)) {
-      id[s] = static_cast<int>(p.size());
-      p.push_back(b.vertex[s]);
-    }
-  for (auto& f : faces)
-    for (int i = 0; i < 3; ++i) f[i] = id[f[i]];
-  smooth(p, faces, b.threads);
-  std::vector<Eigen::Vector3d> normal(p.size(), Eigen::Vector3d::Zero());
-  for (const auto& f : faces) {
-    const Eigen::Vector3d nf = (p[f[1]] - p[f[0]]).cross(p[f[2]] - p[f[0]]);  // area-weighted
-    for (int i = 0; i < 3; ++i) normal[f[i]] += nf;
-  }
-  mesh.vertices.resize(p.size());
-  mesh.normals.resize(p.size());
-  for (size_t i = 0; i < p.size(); ++i) {
-    mesh.vertices[i] = p[i].cast<float>();
-    const double len = normal[i].norm();
-    mesh.normals[i] =
-        len > 0 ? Eigen::Vector3f((normal[i] / len).cast<float>()) : Eigen::Vector3f::UnitZ();
-  }
-  mesh.faces = std::move(faces);
-  return mesh;
 }
 
 }  // namespace previz::carving

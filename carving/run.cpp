@@ -103,6 +103,9 @@ cv::Mat depthPreview(const cv::Mat& depth, double lo, double hi) {
 struct FrameInputs {
   std::vector<cv::Mat> silhouettes;  // CV_8UC1 255/0; empty where dropped
   std::vector<std::string> dropped;  // "" = used, else why
+  // With refine_depth: the plates (8-bit BGR; empty where unreadable, with the reason).
+  std::vector<cv::Mat> plates;
+  std::vector<std::string> plate_missing;
 };
 
 }  // namespace
@@ -158,6 +161,7 @@ void RunOptions::validate() const {
                 fieldContext("shard"));
   if (frames.first < 0 || (frames.end >= 0 && frames.end <= frames.first))
     throw Error("carve: frame range must have 0 <= first < end", fieldContext("frames"));
+  if (refine_depth) refine.validate();
 }
 
 nlohmann::json FrameReport::toJson() const {
@@ -174,6 +178,14 @@ nlohmann::json FrameReport::toJson() const {
           {"depth_pixels", depth_pixels},
           {"depth_min_m", depth_min_m},
           {"depth_max_m", depth_max_m},
+          {"refine", refine_source.empty()
+                         ? nlohmann::json(nullptr)
+                         : nlohmann::json{{"source", refine_source},
+                                          {"pixels", refine_pixels},
+                                          {"moved", refine_moved},
+                                          {"witnesses", refine_witnesses},
+                                          {"gains_estimated", refine_gains_estimated},
+                                          {"ms", refine_ms}}},
           {"mesh_vertices", mesh_vertices},
           {"mesh_faces", mesh_faces},
           {"points", points},
@@ -204,6 +216,10 @@ struct CarveJob::Impl {
     FrameInputs in;
     in.silhouettes.resize(n);
     in.dropped.resize(n);
+    if (options.refine_depth) {
+      in.plates.resize(n);
+      in.plate_missing.resize(n);
+    }
     const int threads = options.hull.threads > 0 ? options.hull.threads : omp_get_max_threads();
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (int i = 0; i < n; ++i) {
@@ -213,7 +229,13 @@ struct CarveJob::Impl {
           in.dropped[i] = input.dropped;
         } else if (take.hasMasks()) {
           in.silhouettes[i] = input.mask;
+          if (options.refine_depth) {
+            const CameraFrame plate = take.readPlate(input_names[i], frame);
+            in.plates[i] = plate.image;
+            in.plate_missing[i] = plate.dropped;
+          }
         } else {
+          if (options.refine_depth) in.plates[i] = input.image;
           const std::string source = take.framePath(input_names[i], frame).string();
           in.silhouettes[i] = keyers[i].key(input.image, source).silhouette;
         }
@@ -274,6 +296,44 @@ struct CarveJob::Impl {
                   {{"previz:camera", depth_name}, {"previz:frame", std::to_string(frame)},
                    {"previz:source", "visual hull (previz carve)"}});
     writeImageAtomic(path("depth", frame, ".png"), depthPreview(depth, lo, hi));
+    if (!options.refine_depth) return;
+
+    // The second layer: beyond the hull by photo-consistency. Without the depth camera's plate
+    // (or its silhouette) it is the hull depth, and the report says why.
+    cv::Mat refined = depth;
+    const std::string why = !in.dropped[d].empty()       ? depth_name + " dropped"
+                            : !in.plates[d].empty()      ? std::string()
+                            : !in.plate_missing[d].empty() ? in.plate_missing[d]
+                                                           : depth_name + " has no plate";
+    if (!options.depth_inside_silhouette) {
+      report.refine_source = "none: depth everywhere (no silhouette to refine in)";
+    } else if (!why.empty()) {
+      report.refine_source = "none: " + why;
+    } else {
+      std::vector<Plate> witness_plates(carve_names.size());
+      std::vector<cv::Mat> witness_masks(carve_names.size());
+      for (size_t j = 0; j < carve_names.size(); ++j) {
+        if (!in.dropped[j].empty() || in.plates[j].empty()) continue;
+        witness_plates[j] = Plate{in.plates[j], take.gain(carve_names[j])};
+        witness_masks[j] = in.silhouettes[j];
+      }
+      RefineStats stats;
+      refined = refineDepth(*carver, hull, take.cameraAt(depth_name, frame),
+                            Plate{in.plates[d], take.gain(depth_name)}, depth, witness_plates,
+                            witness_masks, options.refine, &stats);
+      report.refine_source = "plates";
+      report.refine_pixels = stats.pixels;
+      report.refine_moved = stats.moved;
+      report.refine_witnesses = stats.witnesses_used;
+      report.refine_gains_estimated = stats.gains_estimated;
+      report.refine_ms = stats.ms;
+    }
+    writeDepthExr(path("depth_refined", frame, ".exr"), refined,
+                  {{"previz:camera", depth_name}, {"previz:frame", std::to_string(frame)},
+                   {"previz:source", report.refine_source == "plates"
+                                         ? "visual hull refined by photo-consistency (previz carve --refine)"
+                                         : "visual hull (previz carve --refine: " + report.refine_source + ")"}});
+    writeImageAtomic(path("depth_refined", frame, ".png"), depthPreview(refined, lo, hi));
   }
 };
 
@@ -337,6 +397,12 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
               {"rig_format", take.rigFormat()},
               {"points", {{"spacing_m", m.options.points.spacing_m},
                           {"estimate_normals", m.options.points.estimate_normals}}}};
+  if (m.options.refine_depth) {
+    const RefineOptions& r = m.options.refine;
+    m.config["refine"] = {{"search_m", r.search_m}, {"step_m", r.step_m}, {"agree", r.agree},
+                          {"best_of", r.best_of}, {"visibility_m", r.visibility_m},
+                          {"veto", r.veto}, {"veto_m", r.veto_m}, {"margin", r.margin}};
+  }
 }
 
 CarveJob::~CarveJob() = default;
@@ -364,6 +430,10 @@ std::vector<fs::path> CarveJob::outputs(int frame) const {
   if (!m.depth_name.empty()) {
     paths.push_back(m.path("depth", frame, ".exr"));
     paths.push_back(m.path("depth", frame, ".png"));
+    if (m.options.refine_depth) {
+      paths.push_back(m.path("depth_refined", frame, ".exr"));
+      paths.push_back(m.path("depth_refined", frame, ".png"));
+    }
   }
   paths.push_back(m.path("mesh", frame, ".ply"));
   paths.push_back(m.path("mesh", frame, ".obj"));

@@ -16,6 +16,7 @@
 #include "carving/hull.h"
 #include "carving/keyer.h"
 #include "carving/pointcloud.h"
+#include "carving/refine.h"
 #include "carving/take.h"
 
 namespace previz::carving {
@@ -52,6 +53,12 @@ struct RunOptions {
   // true: depth only inside the depth camera's silhouette (its key or mask); false: wherever
   // the pixel's ray meets the hull (e.g. a camera left out of the carve, to check the hull).
   bool depth_inside_silhouette = true;
+  // Also write depth_refined/: the depth camera's depth beyond the visual hull by
+  // photo-consistency of the plates (refine.h), beside the hull depth. Needs the plates
+  // (cams/<cam>/%06d.png) of the depth camera and the carving cameras, also with masks; gains
+  // from take.json "camera_gains".
+  bool refine_depth = false;
+  RefineOptions refine;
   void validate() const;  // throws Error naming the field
 };
 
@@ -71,6 +78,13 @@ struct FrameReport {
   double volume_m3 = 0;            // inside cells + half the surface cells
   long long depth_pixels = 0;      // finite depth pixels
   double depth_min_m = 0, depth_max_m = 0;  // range of the preview's colour scale
+  // With refine_depth: "plates" (refined) or "none: <why>" (depth_refined = the hull depth), the
+  // pixels refined and given a deeper depth, and its time (part of depth_ms).
+  std::string refine_source;
+  long long refine_pixels = 0, refine_moved = 0;
+  std::vector<std::string> refine_witnesses;
+  std::vector<std::string> refine_gains_estimated;  // witnesses whose gain take.json lacks
+  double refine_ms = 0;
   long long mesh_vertices = 0, mesh_faces = 0, points = 0;
   // key: read + key (or read masks); mesh: Carver::mesh; export: point cloud + every write of
   // the geometry; depth includes its EXR and preview writes.

@@ -135,6 +135,13 @@ Take::Take(const TakeSource& source) : source_(source) {
     const nlohmann::json j = readJsonFile(take_json);
     if (j.contains("frames") && j["frames"].is_number_integer())
       for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(f);
+    if (j.contains("camera_gains") && j["camera_gains"].is_object())
+      for (const auto& [name, g] : j["camera_gains"].items()) {
+        if (!g.is_number() || !(g.get<double>() > 0))
+          throw Error("camera_gains: the gain of '" + name + "' must be a number > 0",
+                      context(take_json, "camera_gains"));
+        gains_[name] = g.get<double>();
+      }
   }
   frames_.assign(frames.begin(), frames.end());
   if (frames_.empty())
@@ -207,13 +214,14 @@ cv::Mat Take::cleanPlate(const std::string& camera) const {
   return plate;
 }
 
-CameraFrame Take::read(const std::string& camera, int frame) const {
-  const RigCamera& rc = rig_.at(camera);
+namespace {
+
+// One camera's image file for one frame; what = "frame" or "mask" (for the drop reason).
+CameraFrame readCameraFile(const RigCamera& rc, int frame, const fs::path& path, bool mask) {
   CameraFrame out;
-  out.camera = camera;
+  out.camera = rc.camera.name;
   out.frame = frame;
-  const fs::path path = hasMasks() ? maskPath(camera, frame) : framePath(camera, frame);
-  const char* what = hasMasks() ? "mask" : "frame";
+  const char* what = mask ? "mask" : "frame";
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) {
     out.dropped = std::string("missing ") + what + " " + path.string();
@@ -221,7 +229,7 @@ CameraFrame Take::read(const std::string& camera, int frame) const {
   }
   cv::Mat image;
   try {
-    image = readImage(path, hasMasks() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
+    image = readImage(path, mask ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
   } catch (const Error& e) {
     out.dropped = std::string("unreadable ") + what + " (corrupt or truncated?): " + e.what();
     return out;
@@ -232,12 +240,29 @@ CameraFrame Take::read(const std::string& camera, int frame) const {
                   "x" + std::to_string(rc.camera.height) + ": " + path.string();
     return out;
   }
-  if (hasMasks()) {
+  if (mask) {
     cv::threshold(image, out.mask, 127, 255, cv::THRESH_BINARY);
   } else {
     out.image = image;
   }
   return out;
+}
+
+}  // namespace
+
+CameraFrame Take::read(const std::string& camera, int frame) const {
+  const RigCamera& rc = rig_.at(camera);
+  return hasMasks() ? readCameraFile(rc, frame, maskPath(camera, frame), true)
+                    : readCameraFile(rc, frame, framePath(camera, frame), false);
+}
+
+CameraFrame Take::readPlate(const std::string& camera, int frame) const {
+  return readCameraFile(rig_.at(camera), frame, framePath(camera, frame), false);
+}
+
+double Take::gain(const std::string& camera) const {
+  const auto it = gains_.find(camera);
+  return it == gains_.end() ? 0.0 : it->second;
 }
 
 RigCamera Take::cameraAt(const std::string& camera, int frame) const {

@@ -68,6 +68,14 @@ class Take {
   // frame: the reason goes to CameraFrame::dropped. Throws only for a camera not in the rig.
   CameraFrame read(const std::string& camera, int frame) const;
 
+  // Reads one camera's plate (cams/<cam>/%06d.png) whether or not the take has masks (depth
+  // refinement compares plates); never throws for a bad frame, as read().
+  CameraFrame readPlate(const std::string& camera, int frame) const;
+
+  // The camera's linear gain from take.json "camera_gains" (a synthetic take's per-camera
+  // brightness); 0 = unknown when the take does not say (refinement then estimates it).
+  double gain(const std::string& camera) const;
+
   // The camera as it was at that frame (the main camera's pose from main_poses when given).
   RigCamera cameraAt(const std::string& camera, int frame) const;
 
@@ -77,6 +85,7 @@ class Take {
   std::string rig_format_;
   std::vector<int> frames_;
   std::map<int, Pose> main_poses_;
+  std::map<std::string, double> gains_;
   std::string main_name_;
 };
 

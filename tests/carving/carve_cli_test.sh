@@ -65,6 +65,14 @@ if "$bin" carve "${common[@]}" --masks "$tmp/masks" --frames 1 --out "$tmp/dropp
   ok "missing witness frame dropped and named"
 else fail "dropped camera: $(cat "$tmp/dropped.err")"; fi
 
+# --refine: the second depth layer beside the hull depth, from the plates (also with masks).
+if "$bin" carve "${common[@]}" --masks "$take/truth/masks" --frames 1 --refine --out "$tmp/refined" >/dev/null 2>"$tmp/refined.err" \
+   && [ -s "$tmp/refined/depth_refined/000001.exr" ] && [ -s "$tmp/refined/depth_refined/000001.png" ] \
+   && [ -s "$tmp/refined/depth/000001.exr" ] \
+   && grep -q '"refine":{"gains_estimated":\[\],"moved":[0-9]*,"ms":[0-9.e+-]*,"pixels":[1-9][0-9]*,"source":"plates","witnesses":\["witness01","witness02","witness03","witness04"\]}' "$tmp/refined/report/000001.json"; then
+  ok "--refine writes depth_refined/ and reports it"
+else fail "--refine: $(tail -n 3 "$tmp/refined.err") $(head -c 600 "$tmp/refined/report/000001.json" 2>/dev/null)"; fi
+
 # Keyed plates (no masks), one frame.
 if "$bin" carve "${common[@]}" --frames 0:1 --out "$tmp/keyed" >/dev/null 2>"$tmp/keyed.err" \
    && grep -q '"depth_silhouette":"key"' "$tmp/keyed/report/000000.json"; then

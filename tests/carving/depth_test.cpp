@@ -123,8 +123,9 @@ double orderedFraction(const cv::Mat& depth, const cv::Mat& truth, double d, boo
 // is a superset of the actor, so in-front planes are the hard case, and how hard depends on the
 // rig: this studio leaves a gap in the witness ring around the main camera's line of sight
 // (datasets/rigs.h), so nothing carves the hull's front as the main camera sees it. The
-// implementation must match the exact hull's fraction; the 99.5 % goal at 10 cm is asserted at
-// 20 cm, where this rig's exact hull reaches it (see the printed figures).
+// implementation must match the exact hull's fraction; for the hull depth the 99.5 % goal at
+// 10 cm is asserted at 20 cm, where this rig's exact hull reaches it (see the printed figures).
+// The refined depth (carving/refine.h) reaches it at 10 cm: tests/carving/refine_test.cpp.
 TEST(HullDepth, OrdersActorAgainstPlanesLikeTheExactHull) {
   const StudioFrame& f = frame();
   Carver carver(f.witnesses, hullOptions());

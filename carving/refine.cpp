@@ -1,0 +1,317 @@
+// Depth beyond the visual hull by photo-consistency along the depth camera's rays (refine.h).
+#include "carving/refine.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+
+namespace previz::carving {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// sRGB code value -> linear light (IEC 61966-2-1).
+const std::array<float, 256>& srgbToLinear() {
+  static const std::array<float, 256> lut = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double e = i / 255.0;
+      t[i] = static_cast<float>(e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4));
+    }
+    return t;
+  }();
+  return lut;
+}
+
+struct Witness {
+  const RigCamera* rc = nullptr;
+  Pose T_cam_world;
+  cv::Mat bgr;         // the plate (8-bit, sRGB)
+  double gain = 1;     // given (> 0) or estimated (estimateGains)
+  bool estimated = false;
+  int gain_samples = 0;
+  float inv_gain = 1;
+  cv::Mat front;       // nearest hull depth per kVisibilityBlock^2 pixels (visibilityMap)
+};
+
+// The witnesses' hull depth only serves the loose visibility test (a candidate more than
+// visibility_m behind it is hidden), so it is made at a quarter of the witness' resolution:
+// 16x fewer rays (and ray tables) per witness.
+constexpr int kVisibilityBlock = 4;
+
+// Per block of kVisibilityBlock^2 witness pixels, a depth no farther than the hull's first
+// surface at any of its pixels: the hull depth of the scaled-down camera (silhouette max-pooled,
+// so every block that holds an inside pixel is cast), then the minimum over each block's 3x3
+// neighbourhood (the scaled rays are not the full-size ones).
+cv::Mat visibilityMap(const Carver& carver, const VisualHull& hull, const RigCamera& rc,
+                      const cv::Mat& mask) {
+  const int b = kVisibilityBlock;
+  const int w = (rc.camera.width + b - 1) / b, h = (rc.camera.height + b - 1) / b;
+  RigCamera small = rc;
+  small.camera = rc.camera.scaled(static_cast<double>(w) / rc.camera.width,
+                                  static_cast<double>(h) / rc.camera.height);
+  small.camera.width = w;
+  small.camera.height = h;
+  cv::Mat pooled(h, w, CV_8UC1, cv::Scalar(0));
+  for (int v = 0; v < mask.rows; ++v) {
+    const std::uint8_t* m = mask.ptr<std::uint8_t>(v);
+    std::uint8_t* out = pooled.ptr<std::uint8_t>(v / b);
+    for (int u = 0; u < mask.cols; ++u)
+      if (m[u] > 127) out[u / b] = 255;
+  }
+  cv::Mat front = carver.depth(hull, small, pooled);
+  cv::erode(front, front, cv::Mat::ones(3, 3, CV_8UC1), cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  return front;
+}
+
+// Linear colour of a plate at a pixel position, divided by the camera's gain: bilinear between
+// the four pixel centres around it (false outside the image). Plates are not smoothed: a box
+// filter mixes a part's colour with its neighbour's at every image edge between parts, where the
+// hull's concavities are (measured: 3x3 boxes cost 0.1-0.15 points at 10 cm).
+bool sample(const cv::Mat& bgr, float inv_gain, double u, double v, float* c) {
+  if (!(u >= 0 && v >= 0 && u <= bgr.cols - 1 && v <= bgr.rows - 1)) return false;
+  const std::array<float, 256>& lin = srgbToLinear();
+  const int u0 = std::min(static_cast<int>(u), bgr.cols - 2);
+  const int v0 = std::min(static_cast<int>(v), bgr.rows - 2);
+  const float fu = static_cast<float>(u - u0), fv = static_cast<float>(v - v0);
+  const std::uint8_t* a = bgr.ptr<std::uint8_t>(v0) + 3 * u0;
+  const std::uint8_t* b = bgr.ptr<std::uint8_t>(v0 + 1) + 3 * u0;
+  for (int ch = 0; ch < 3; ++ch)
+    c[ch] = inv_gain * ((1 - fv) * ((1 - fu) * lin[a[ch]] + fu * lin[a[3 + ch]]) +
+                        fv * ((1 - fu) * lin[b[ch]] + fu * lin[b[3 + ch]]));
+  return true;
+}
+
+// Relative colour distance: L1 difference over the pair's mean brightness (floored, so that the
+// noise of near-black pixels does not read as disagreement).
+float colourDistance(const float* a, const float* b) {
+  const float diff = std::abs(a[0] - b[0]) + std::abs(a[1] - b[1]) + std::abs(a[2] - b[2]);
+  const float level = 0.5f * (a[0] + a[1] + a[2] + b[0] + b[1] + b[2]);
+  return diff / std::max(level, 0.03f);
+}
+
+// Gains the caller does not know (<= 0), relative to the depth camera's: where the hull depth
+// is the surface (almost everywhere: the hull is within millimetres of it outside concavities)
+// a witness sees the same Lambertian point at that point's depth on its own hull surface, so the
+// ratio of the two plates' linear brightness there is the ratio of the gains; the median over
+// every 2nd pixel in each direction rejects the concavities, occlusions and edges. Fewer than
+// kMinGainSamples points (a witness facing the actor's other side, which then hardly ever sees
+// a candidate either): gain 1.
+constexpr int kMinGainSamples = 50;
+void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain,
+                   const cv::Mat& hull_depth, std::vector<Witness>& witnesses) {
+  const std::array<float, 256>& lin = srgbToLinear();
+  const Camera& cam = camera.camera;
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  for (Witness& w : witnesses) {
+    if (w.gain > 0) {
+      w.inv_gain = static_cast<float>(1.0 / w.gain);
+      continue;
+    }
+    std::vector<float> ratios;
+    for (int v = 0; v < cam.height; v += 2)
+      for (int u = 0; u < cam.width; u += 2) {
+        const double t = hull_depth.at<float>(v, u);
+        if (!std::isfinite(t)) continue;
+        const std::uint8_t* m = bgr.ptr<std::uint8_t>(v) + 3 * u;
+        const float main_level = lin[m[0]] + lin[m[1]] + lin[m[2]];
+        if (main_level < 0.03f) continue;  // too dark to measure a ratio
+        const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+        if (!ray) continue;
+        const Eigen::Vector3d X = centre + t * (R * (*ray / ray->z()));
+        const Eigen::Vector3d q = w.T_cam_world * X;
+        const auto px = w.rc->camera.project(q);
+        if (!px) continue;
+        const int iu = static_cast<int>(std::floor((px->x() + 0.5) / kVisibilityBlock));
+        const int iv = static_cast<int>(std::floor((px->y() + 0.5) / kVisibilityBlock));
+        if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
+        if (!(std::abs(q.z() - w.front.at<float>(iv, iu)) < 0.02)) continue;
+        float cw[3];
+        if (!sample(w.bgr, 1.0f, px->x(), px->y(), cw)) continue;
+        ratios.push_back((cw[0] + cw[1] + cw[2]) / main_level);
+      }
+    w.estimated = true;
+    w.gain_samples = static_cast<int>(ratios.size());
+    if (static_cast<int>(ratios.size()) < kMinGainSamples) {
+      w.gain = 1.0;
+    } else {
+      std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+      w.gain = main_gain * ratios[ratios.size() / 2];
+    }
+    w.inv_gain = static_cast<float>(1.0 / w.gain);
+  }
+}
+
+}  // namespace
+
+void RefineOptions::validate() const {
+  auto bad = [](const std::string& field, const std::string& message) {
+    throw Error("refine: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+  };
+  if (!(search_m > 0) || !std::isfinite(search_m))
+    bad("search_m", "must be a finite value > 0 (got " + num(search_m) + ")");
+  if (!(step_m > 0) || !(step_m <= search_m))
+    bad("step_m", "must be > 0 and <= search_m (got " + num(step_m) + ")");
+  if (!(agree > 0) || !std::isfinite(agree))
+    bad("agree", "must be a finite value > 0 (got " + num(agree) + ")");
+  if (best_of < 1) bad("best_of", "must be >= 1 (got " + std::to_string(best_of) + ")");
+  if (!(visibility_m >= 0) || !std::isfinite(visibility_m))
+    bad("visibility_m", "must be a finite value >= 0 (got " + num(visibility_m) + ")");
+  if (!(margin > 0) || !(margin <= 1))
+    bad("margin", "must be in (0, 1] (got " + num(margin) + ")");
+  if (!(veto > 0) || !std::isfinite(veto))
+    bad("veto", "must be a finite value > 0 (got " + num(veto) + ")");
+  if (!(veto_m >= 0) || !(veto_m <= visibility_m))
+    bad("veto_m", "must be in [0, visibility_m] (got " + num(veto_m) + ")");
+  if (threads < 0) bad("threads", "must be >= 0 (got " + std::to_string(threads) + ")");
+}
+
+cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
+                    const Plate& plate, const cv::Mat& hull_depth,
+                    const std::vector<Plate>& witness_plates,
+                    const std::vector<cv::Mat>& witness_masks, const RefineOptions& options,
+                    RefineStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  const Camera& cam = camera.camera;
+  auto check = [](const cv::Mat& m, int type, const Camera& c, const char* what) {
+    if (m.type() != type || m.cols != c.width || m.rows != c.height)
+      throw Error(std::string("refine: ") + what + " must be " +
+                      (type == CV_8UC3 ? "8-bit BGR" : type == CV_8UC1 ? "8-bit single-channel"
+                                                                       : "32-bit float") +
+                      " at the camera's " + std::to_string(c.width) + "x" +
+                      std::to_string(c.height),
+                  ErrorContext{"", c.name, std::nullopt, what});
+  };
+  check(plate.bgr, CV_8UC3, cam, "plate");
+  check(hull_depth, CV_32FC1, cam, "hull depth");
+  const std::vector<RigCamera>& cams = carver.cameras();
+  if (witness_plates.size() != cams.size() || witness_masks.size() != cams.size())
+    throw Error("refine: " + std::to_string(witness_plates.size()) + " plates and " +
+                    std::to_string(witness_masks.size()) + " masks for " +
+                    std::to_string(cams.size()) + " carving cameras",
+                ErrorContext{"", cam.name, std::nullopt, "witness_plates"});
+  RefineStats local;
+  std::vector<Witness> witnesses;
+  for (size_t c = 0; c < cams.size(); ++c) {
+    if (witness_plates[c].bgr.empty() || witness_masks[c].empty()) continue;
+    check(witness_plates[c].bgr, CV_8UC3, cams[c].camera, "plate");
+    check(witness_masks[c], CV_8UC1, cams[c].camera, "mask");
+    Witness w;
+    w.rc = &cams[c];
+    w.T_cam_world = cams[c].T_world_cam.inverse();
+    w.bgr = witness_plates[c].bgr;
+    w.gain = witness_plates[c].gain;
+    w.front = visibilityMap(carver, hull, cams[c], witness_masks[c]);
+    witnesses.push_back(std::move(w));
+    local.witnesses_used.push_back(cams[c].camera.name);
+  }
+  cv::Mat out = hull_depth.clone();
+  const std::array<float, 256>& lin = srgbToLinear();
+  const double main_gain = plate.gain > 0 ? plate.gain : 1.0;
+  const float main_inv_gain = static_cast<float>(1.0 / main_gain);
+  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  estimateGains(camera, plate.bgr, main_gain, hull_depth, witnesses);
+  for (const Witness& w : witnesses) {
+    local.witness_gains.push_back(w.gain);
+    if (w.estimated) {
+      local.gains_estimated.push_back(w.rc->camera.name);
+      local.gain_samples.push_back(w.gain_samples);
+    }
+  }
+  const int n_steps = static_cast<int>(std::floor(options.search_m / options.step_m));
+  const int nw = static_cast<int>(witnesses.size());
+  long long pixels = 0, inconsistent = 0, moved = 0;
+
+  // Cost of the point X for the plate colour c: mean of the best_of smallest colour distances
+  // over the witnesses that can see X; +inf when fewer see it. A witness that has X on its own
+  // hull surface (within veto_m) sees X itself if X is matter (the hull holds all of it, so
+  // nothing can hide X from it): its disagreement beyond 'veto' rules X out.
+  auto cost = [&](const Eigen::Vector3d& X, const float* c) {
+    float d[32];
+    double vetoed = 0;
+    int n = 0;
+    for (int i = 0; i < nw && n < 32; ++i) {
+      const Witness& w = witnesses[i];
+      const Eigen::Vector3d q = w.T_cam_world * X;
+      const auto px = w.rc->camera.project(q);
+      if (!px) continue;
+      const int iu = static_cast<int>(std::floor((px->x() + 0.5) / kVisibilityBlock));
+      const int iv = static_cast<int>(std::floor((px->y() + 0.5) / kVisibilityBlock));
+      if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
+      const float front = w.front.at<float>(iv, iu);
+      if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
+      float cw[3];
+      if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
+      d[n] = colourDistance(c, cw);
+      if (q.z() <= front + options.veto_m && d[n] > options.veto)
+        vetoed = std::max(vetoed, static_cast<double>(d[n]));
+      ++n;
+    }
+    if (n < options.best_of) return kInf;
+    std::partial_sort(d, d + options.best_of, d + n);
+    double s = 0;
+    for (int i = 0; i < options.best_of; ++i) s += d[i];
+    return std::max(s / options.best_of, vetoed);
+  };
+
+#pragma omp parallel for schedule(dynamic, 4) num_threads(threads) reduction(+ : pixels, inconsistent, moved)
+  for (int v = 0; v < cam.height; ++v) {
+    float* row = out.ptr<float>(v);
+    const std::uint8_t* bgr = plate.bgr.ptr<std::uint8_t>(v);
+    for (int u = 0; u < cam.width; ++u) {
+      const double t0 = row[u];
+      if (!std::isfinite(t0)) continue;
+      ++pixels;
+      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+      if (!ray) continue;
+      const Eigen::Vector3d d = R * (*ray / ray->z());
+      const float c[3] = {main_inv_gain * lin[bgr[3 * u]], main_inv_gain * lin[bgr[3 * u + 1]],
+                          main_inv_gain * lin[bgr[3 * u + 2]]};
+      const double cost0 = cost(centre + t0 * d, c);
+      if (cost0 <= options.agree) continue;
+      ++inconsistent;
+      for (int s = 1; s <= n_steps; ++s) {
+        const double t = t0 + s * options.step_m;
+        const Eigen::Vector3d X = centre + t * d;
+        if (!carver.inside(hull, X)) continue;
+        const double k = cost(X, c);
+        if (k <= options.agree && k <= options.margin * cost0) {
+          row[u] = static_cast<float>(t);
+          ++moved;
+          break;
+        }
+      }
+    }
+  }
+  local.pixels = pixels;
+  local.inconsistent = inconsistent;
+  local.moved = moved;
+  local.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                 .count();
+  if (stats) *stats = std::move(local);
+  return out;
+}
+
+}  // namespace previz::carving

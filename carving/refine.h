@@ -1,0 +1,80 @@
+#pragma once
+// Depth beyond the visual hull: photo-consistency along each main-camera ray inside the hull.
+// The hull is a superset of the actor; where every silhouette contains a concavity (the crease
+// between backpack and torso, the gap between arm and torso) its depth lies in front of the
+// true surface. For each pixel inside the depth camera's silhouette, candidate depths from the
+// hull entry backwards (inside the hull only) are scored by the colour agreement of the depth
+// camera's plate with the witness plates at the candidate's projections (linear light, each
+// plate divided by its camera's gain), the witnesses that cannot see the candidate (it lies far
+// behind their own hull surface) left out, and a witness that must see it (it lies on that
+// witness' hull surface) vetoing it when it disagrees. The hull depth stays where it is
+// photo-consistent or where nothing deeper is decisively better; the nearest consistent
+// candidate wins (the best-scoring one pushes pixels behind the surface: measured).
+// Conventions: docs/conventions.md.
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "carving/hull.h"
+#include "core/rig.h"
+
+namespace previz::carving {
+
+struct RefineOptions {
+  double search_m = 0.25;   // how far behind the hull entry candidates go (along z)
+  double step_m = 0.005;    // candidate spacing (along z)
+  // Colour distance (relative, see refine.cpp) under which a witness agrees with the plate.
+  double agree = 0.10;
+  // The best 'best_of' visible witnesses are averaged into a candidate's cost (occlusion by
+  // other body parts makes the rest disagree); a candidate needs that many visible witnesses.
+  int best_of = 2;
+  // A witness sees a candidate when it lies at most this far behind the witness' own hull
+  // surface at its projection (the hull's concavities hide the true surface by up to this).
+  double visibility_m = 0.22;
+  // A witness that has the candidate on its own hull surface (at most veto_m behind it) would
+  // see it if it were matter (the hull holds all of it); its colour distance above 'veto' rules
+  // the candidate out. This is what carves the air of a same-coloured crease that the best
+  // two witnesses agree on.
+  double veto = 0.3;
+  double veto_m = 0.05;
+  // A deeper candidate replaces the hull entry only when its cost is below 'agree' and below
+  // the entry's cost times 'margin'.
+  double margin = 0.5;
+  int threads = 0;
+  void validate() const;  // throws Error naming the field
+};
+
+// One camera's plate for refinement: 8-bit BGR (sRGB-encoded), the camera's full image size,
+// and its linear gain (the plate's linear radiance = gain x the scene's); empty = not used.
+// gain <= 0 = unknown: a witness' gain is then estimated from the frame relative to the depth
+// camera's (refine.cpp, estimateGains); the depth camera's unknown gain is taken as 1 (only
+// the ratios matter).
+struct Plate {
+  cv::Mat bgr;
+  double gain = 1.0;
+};
+
+struct RefineStats {
+  long long pixels = 0;      // pixels with a finite hull depth
+  long long inconsistent = 0;  // whose hull entry is not photo-consistent
+  long long moved = 0;       // given a deeper depth
+  double ms = 0;
+  std::vector<std::string> witnesses_used;
+  std::vector<double> witness_gains;         // the gains used, same order
+  std::vector<std::string> gains_estimated;  // witnesses whose gain was estimated
+  std::vector<int> gain_samples;             // points each estimate is the median of
+};
+
+// Refined depth of 'camera' (CV_32FC1, z along its axis, +inf where hull_depth is): hull_depth
+// is Carver::depth(hull, camera, silhouette) (the refined depth is never nearer than it).
+// witness_plates and witness_masks follow the carver's camera order (masks: the silhouettes
+// carve() was given; a camera with an empty plate or mask is not used). Throws Error naming the
+// camera when a plate or mask has the wrong size or type.
+cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
+                    const Plate& plate, const cv::Mat& hull_depth,
+                    const std::vector<Plate>& witness_plates,
+                    const std::vector<cv::Mat>& witness_masks, const RefineOptions& options = {},
+                    RefineStats* stats = nullptr);
+
+}  // namespace previz::carving

@@ -1,0 +1,226 @@
+// Depth beyond the visual hull (carving/refine.h), item 2 of issue 5: a virtual plane 5, 10 and
+// 20 cm in front of / behind the true actor surface, per main pixel: is the actor put on the
+// right side of it? Silhouettes are the true actor mesh rasterized through each camera's true
+// lens (hull_fixture.h); the plates are rendered by the synthetic studio (stage + actor, 4 spp,
+// sensor noise 2 grey levels, a different gain per camera); witnesses at 1280x720, the main
+// camera at 960x540. Truth: the rasterized depth of the actor mesh in the main camera.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "carving/refine.h"
+#include "core/error.h"
+#include "datasets/render.h"
+#include "hull_fixture.h"
+
+namespace previz::carving {
+namespace {
+
+using namespace previz::carving::test;
+
+constexpr int kMainW = 960, kMainH = 540;
+
+struct PlateFrame {
+  StudioFrame studio;
+  std::vector<Plate> witness_plates;
+  Plate main_plate;
+};
+
+// Gains as a studio sets them (+-10 %), different for every camera.
+double gainOf(int camera) { return 1.0 + 0.1 * std::sin(3.0 * camera + 1.0); }
+
+PlateFrame makePlateFrame(double time_s) {
+  PlateFrame f{makeStudioFrame(time_s, kMainW, kMainH), {}, {}};
+  const synth::Studio studio(synth::StudioConfig{});
+  const synth::Scene scene = studio.sceneAt(time_s, synth::kLayerStage | synth::kLayerActor);
+  auto render = [&](const RigCamera& c, int index) {
+    synth::RenderOptions o;
+    o.samples_per_pixel = 4;
+    o.gain = gainOf(index);
+    o.noise_sigma = 2.0;
+    o.camera_index = index;
+    o.truth = false;
+    return Plate{synth::renderView(c.camera, c.T_world_cam, scene, o).bgr, o.gain};
+  };
+  for (size_t c = 0; c < f.studio.witnesses.size(); ++c)
+    f.witness_plates.push_back(render(f.studio.witnesses[c], static_cast<int>(c)));
+  f.main_plate = render(f.studio.main, static_cast<int>(f.studio.witnesses.size()));
+  return f;
+}
+
+// Fraction of true actor pixels where 'depth' keeps the actor on the right side of a plane at
+// distance d in front of (front = true) or behind its true surface.
+double orderedFraction(const cv::Mat& depth, const cv::Mat& truth, double d, bool front) {
+  int n = 0, ok = 0;
+  for (int v = 0; v < truth.rows; ++v)
+    for (int u = 0; u < truth.cols; ++u) {
+      const double z = truth.at<float>(v, u);
+      if (!std::isfinite(z)) continue;
+      const double ours = depth.at<float>(v, u);
+      ++n;
+      ok += front ? ours > z - d : ours < z + d;
+    }
+  return double(ok) / n;
+}
+
+struct Ordering {
+  double front[3], behind[3];  // at 5, 10, 20 cm
+};
+constexpr double kPlanes[3] = {0.05, 0.10, 0.20};
+
+Ordering ordering(const cv::Mat& depth, const cv::Mat& truth) {
+  Ordering o;
+  for (int i = 0; i < 3; ++i) {
+    o.front[i] = orderedFraction(depth, truth, kPlanes[i], true);
+    o.behind[i] = orderedFraction(depth, truth, kPlanes[i], false);
+  }
+  return o;
+}
+
+struct Result {
+  Ordering hull, refined;
+  RefineStats stats;
+};
+
+// Carves the frame, takes the hull depth and refines it; prints item 2 for both.
+Result run(const PlateFrame& f, const char* label) {
+  HullOptions o;
+  o.voxel_m = 0.005;
+  Carver carver(f.studio.witnesses, o);
+  Silhouettes s;
+  s.masks = f.studio.masks;
+  const VisualHull hull = carver.carve(s);
+  const cv::Mat hull_depth = carver.depth(hull, f.studio.main, f.studio.main_raster.mask);
+  Result r;
+  const cv::Mat refined = refineDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
+                                      f.witness_plates, f.studio.masks, RefineOptions{}, &r.stats);
+  const cv::Mat& truth = f.studio.main_raster.depth;
+  r.hull = ordering(hull_depth, truth);
+  r.refined = ordering(refined, truth);
+  std::printf("%s: %lld pixels, %lld not photo-consistent at the hull, %lld moved deeper, %.0f ms\n",
+              label, r.stats.pixels, r.stats.inconsistent, r.stats.moved, r.stats.ms);
+  for (int i = 0; i < 3; ++i)
+    std::printf("  plane %2.0f cm in front: hull %.3f %%, refined %.3f %% | %2.0f cm behind: hull "
+                "%.3f %%, refined %.3f %%\n",
+                100 * kPlanes[i], 100 * r.hull.front[i], 100 * r.refined.front[i],
+                100 * kPlanes[i], 100 * r.hull.behind[i], 100 * r.refined.behind[i]);
+  // Never nearer than the hull (the actor lies inside it), and finite exactly where it is.
+  int nearer = 0, finite_mismatch = 0;
+  for (int v = 0; v < hull_depth.rows; ++v)
+    for (int u = 0; u < hull_depth.cols; ++u) {
+      const float h = hull_depth.at<float>(v, u), d = refined.at<float>(v, u);
+      finite_mismatch += std::isfinite(h) != std::isfinite(d);
+      nearer += std::isfinite(h) && d < h;
+    }
+  EXPECT_EQ(nearer, 0);
+  EXPECT_EQ(finite_mismatch, 0);
+  EXPECT_EQ(r.stats.witnesses_used.size(), f.studio.witnesses.size());
+  return r;
+}
+
+// t = 4 s, the frame of item 1 (walking along the back of the stage, seen from the side): the
+// hull puts 1.6 % of the actor pixels more than 10 cm in front (the creases between arms and
+// torso and at the hips, that every silhouette contains). Photo-consistency takes the goal:
+// measured 99.68 % in front, 99.83 % behind at 10 cm.
+TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
+  const PlateFrame f = makePlateFrame(4.0);
+  const Result r = run(f, "t = 4 s");
+  EXPECT_LT(r.hull.front[1], 0.99);  // the hull alone misses the goal here (so this can fail)
+  EXPECT_GE(r.refined.front[1], 0.995);
+  EXPECT_GE(r.refined.behind[1], 0.995);
+  EXPECT_GE(r.refined.front[2], 0.999);
+  EXPECT_GE(r.refined.behind[2], 0.999);
+  EXPECT_GT(r.refined.front[0], r.hull.front[0] + 0.03);
+  EXPECT_GE(r.refined.behind[0], 0.99);
+
+  // The gains matter: the same plates compared without them (every gain taken as 1) ...
+  PlateFrame no_gain = f;
+  for (Plate& p : no_gain.witness_plates) p.gain = 1.0;
+  no_gain.main_plate.gain = 1.0;
+  const Result n = run(no_gain, "t = 4 s, gains ignored");
+  EXPECT_LT(n.refined.front[1] + n.refined.behind[1], r.refined.front[1] + r.refined.behind[1]);
+  // ... and the witnesses' gains unknown: estimated from the frame against the main camera's.
+  PlateFrame unknown = f;
+  for (Plate& p : unknown.witness_plates) p.gain = 0.0;
+  const Result e = run(unknown, "t = 4 s, witness gains estimated");
+  ASSERT_EQ(e.stats.gains_estimated.size(), f.witness_plates.size());
+  int measured = 0;
+  for (size_t c = 0; c < f.witness_plates.size(); ++c) {
+    std::printf("  %s: gain %.4f estimated from %d points (true %.4f)\n",
+                e.stats.gains_estimated[c].c_str(), e.stats.witness_gains[c],
+                e.stats.gain_samples[c], f.witness_plates[c].gain);
+    if (e.stats.gain_samples[c] < 200) continue;  // facing the actor's back: hardly used
+    ++measured;
+    EXPECT_NEAR(e.stats.witness_gains[c], f.witness_plates[c].gain, 0.01) << c;
+  }
+  EXPECT_GE(measured, 4);
+  // Measured 99.61 % in front / 99.87 % behind (given gains: 99.68 % / 99.83 %).
+  EXPECT_GE(e.refined.front[1], 0.995);
+  EXPECT_GE(e.refined.behind[1], 0.995);
+}
+
+// The hardest of nine frames for the hull: t = 7 s (turning, an upper arm against the torso
+// beside the backpack, 8.5 % of the pixels more than 10 cm in front) and t = 2.5 s (7.0 %). The
+// red sleeve in front of the red shirt and the dark legs side by side are the same colour in
+// every witness, so much of the air in their creases is photo-consistent too and stays.
+// Measured at 10 cm in front: t = 7 s 91.46 % -> 95.25 %, t = 2.5 s 93.03 % -> 98.77 %;
+// asserted as regression bounds, with behind kept >= 99.5 %.
+TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
+  struct Case {
+    double time_s, front_10cm;
+  };
+  for (const Case c : {Case{7.0, 0.95}, Case{2.5, 0.985}}) {
+    const PlateFrame f = makePlateFrame(c.time_s);
+    const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
+    const Result r = run(f, label.c_str());
+    EXPECT_GE(r.refined.front[1], c.front_10cm) << label;
+    EXPECT_GE(r.refined.front[1], r.hull.front[1] + 0.035) << label;
+    EXPECT_GE(r.refined.behind[1], 0.995) << label;
+    EXPECT_GE(r.refined.front[2], r.hull.front[2]) << label;
+    EXPECT_GE(r.refined.behind[2], 0.998) << label;
+  }
+}
+
+TEST(RefineDepth, RejectsBadOptionsAndInputs) {
+  RefineOptions o;
+  o.step_m = 0;
+  EXPECT_THROW(o.validate(), Error);
+  o = RefineOptions{};
+  o.margin = 1.5;
+  EXPECT_THROW(o.validate(), Error);
+  o = RefineOptions{};
+  o.best_of = 0;
+  EXPECT_THROW(o.validate(), Error);
+
+  const StudioFrame f = makeStudioFrame(4.0, 320, 180);
+  Carver carver(f.witnesses, HullOptions{});
+  Silhouettes s;
+  s.masks = f.masks;
+  const VisualHull hull = carver.carve(s);
+  const cv::Mat depth = carver.depth(hull, f.main, f.main_raster.mask);
+  std::vector<Plate> plates(f.witnesses.size());
+  for (size_t c = 0; c < plates.size(); ++c)
+    plates[c].bgr = cv::Mat(f.witnesses[c].camera.height, f.witnesses[c].camera.width, CV_8UC3,
+                            cv::Scalar(0, 200, 0));
+  const Plate wrong_size{cv::Mat(10, 10, CV_8UC3, cv::Scalar(0)), 1.0};
+  try {
+    refineDepth(carver, hull, f.main, wrong_size, depth, plates, f.masks);
+    ADD_FAILURE() << "a plate of the wrong size was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().camera, f.main.camera.name);
+    EXPECT_NE(std::string(e.what()).find("plate"), std::string::npos) << e.what();
+  }
+  const Plate main{cv::Mat(180, 320, CV_8UC3, cv::Scalar(0, 0, 200)), 1.0};
+  std::vector<Plate> too_few(plates.begin(), plates.end() - 1);
+  EXPECT_THROW(refineDepth(carver, hull, f.main, main, depth, too_few, f.masks), Error);
+  // A uniformly green world is photo-consistent nowhere with a red plate: nothing moves.
+  RefineStats stats;
+  const cv::Mat same = refineDepth(carver, hull, f.main, main, depth, plates, f.masks, {}, &stats);
+  EXPECT_GT(stats.pixels, 100);
+  EXPECT_EQ(stats.moved, 0);
+  EXPECT_EQ(cv::countNonZero(same != depth), 0);
+}
+
+}  // namespace
+}  // namespace previz::carving

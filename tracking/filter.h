@@ -24,8 +24,8 @@
 namespace previz::tracking {
 
 struct FilterOptions {
-  double accel_sigma_mps2 = 0.5;
-  double angular_accel_sigma_radps2 = 1.0;
+  double accel_sigma_mps2 = 0.005;
+  double angular_accel_sigma_radps2 = 0.01;
   double gate_sigma = 4.0;
   double min_position_sigma_m = 0.0002;
   double min_rotation_sigma_rad = 0.0002;

@@ -121,19 +121,29 @@ struct StudioFixture {
 
   // The crate at T_world_prop (with the actor of time_s when 'actor'), camera c, frame 'frame'
   // (noise stream). 'scene' must contain the prop at T_world_prop.
-  cv::Mat renderWith(int c, const synth::Scene& scene, const Pose& T_world_prop, int frame) const {
+  // Adds N(0, noise_sigma) grey levels to the pixels of 'region' (rounded, saturated).
+  void addNoise(cv::Mat& img, const cv::Rect& region, std::uint64_t seed) const {
+    if (region.area() <= 0) return;
+    cv::Mat view = img(region);
+    cv::Mat noise(view.size(), CV_32FC3);
+    cv::RNG rng(seed);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
+    cv::Mat f;
+    view.convertTo(f, CV_32FC3);
+    f += noise;
+    f.convertTo(view, CV_8UC3);
+  }
+
+  // 'clean': no noise in the window (callers add their own per frame with addNoise).
+  cv::Mat renderWith(int c, const synth::Scene& scene, const Pose& T_world_prop, int frame, bool clean = false,
+                     int margin = 48) const {
     renderStage();
     const RigCamera& rc = rig.cameras[static_cast<size_t>(c)];
     cv::Mat img = stage[static_cast<size_t>(c)].clone();
     // Noise over the whole frame (the window gets the renderer's own noise instead).
-    cv::Mat noise(img.size(), CV_32FC3);
-    cv::RNG rng(0x9e3779b97f4a7c15ULL ^ (static_cast<std::uint64_t>(c) << 32) ^ static_cast<std::uint64_t>(frame));
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
-    cv::Mat f;
-    img.convertTo(f, CV_32FC3);
-    f += noise;
-    f.convertTo(img, CV_8UC3);  // rounds and saturates
-    const cv::Rect w = propWindow(c, T_world_prop);
+    addNoise(img, cv::Rect(0, 0, img.cols, img.rows),
+             0x9e3779b97f4a7c15ULL ^ (static_cast<std::uint64_t>(c) << 32) ^ static_cast<std::uint64_t>(frame));
+    const cv::Rect w = propWindow(c, T_world_prop, margin);
     if (w.area() <= 0) return img;
     Camera crop = rc.camera;
     crop.width = w.width;
@@ -143,7 +153,7 @@ struct StudioFixture {
     synth::RenderOptions ro;
     ro.truth = false;
     ro.threads = 1;
-    ro.noise_sigma = noise_sigma;
+    ro.noise_sigma = clean ? 0.0 : noise_sigma;
     ro.camera_index = c;
     ro.frame = frame;
     synth::renderView(crop, rc.T_world_cam, scene, ro).bgr.copyTo(img(w));
@@ -151,11 +161,13 @@ struct StudioFixture {
   }
 
   // The take's frame at time_s: actor, crate and stage as the studio has them.
-  std::vector<cv::Mat> renderTake(double time_s, int frame) const {
+  std::vector<cv::Mat> renderTake(double time_s, int frame, int margin = 48) const {
     const synth::Scene scene = studio.sceneAt(time_s, synth::kLayersPlate);
     const Pose T = studio.T_world_prop(time_s);
     std::vector<cv::Mat> images(rig.cameras.size());
-    parallelFor(cameras(), [&](int c) { images[static_cast<size_t>(c)] = renderWith(c, scene, T, frame); });
+    parallelFor(cameras(), [&](int c) {
+      images[static_cast<size_t>(c)] = renderWith(c, scene, T, frame, false, margin);
+    });
     return images;
   }
 };

@@ -18,5 +18,7 @@ Runner addRigCommand(CLI::App& app);
 // `previz calib lens`, registered under the calib command.
 Runner addLensCommand(CLI::App& calib);
 Runner addCarveCommand(CLI::App& app);
+// `previz track` (with verbs `prop` and `camera`); defined only when tracking/ is built.
+Runner addTrackCommand(CLI::App& app);
 
 }  // namespace previz::app

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   add("calib", previz::app::addCalibCommand);
   add("carve", previz::app::addCarveCommand);
   add("rig", previz::app::addRigCommand);
+  add("track", previz::app::addTrackCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");
 

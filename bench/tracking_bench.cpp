@@ -1,0 +1,206 @@
+// Tracking benchmark (issue 6, item 3 and the 3 ms tag-tracking budget): 48 consecutive frames
+// (2 s at 24 fps from t = 2 s, where the crate moves fastest) of the studio's tagged crate seen by
+// the 8 witnesses at 1280x720, noise sigma = 2, rendered by the synthetic studio
+// (tests/tracking/studio_fixture.h: the crate's window traced, the rest the empty stage). Then, in
+// this process and on the same frames: PropTracker with full-frame search on every frame, with ROI
+// search (full frame only on the first frame), and with ROI plus a full frame every 30 frames; the
+// joint solve and the filter alone. It also checks that the ROI search found the same tags as the
+// full-frame search of the same frame in every camera.
+// Besides Google Benchmark's table, one JSON line per case:
+//   {"stage":..., "size":..., "ms":..., "cpu_ms":..., "budget_ms":..., "threads":...}
+// "ms" is the median wall time per frame, "cpu_ms" the median CPU time of the process per frame.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <map>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/tracking/studio_fixture.h"
+#include "tracking/filter.h"
+#include "tracking/solve.h"
+#include "tracking/tracker.h"
+
+namespace {
+
+using namespace previz;
+using namespace previz::tracking;
+
+constexpr int kFrames = 48;
+constexpr double kFps = 24.0;
+constexpr double kBudgetMs = 3.0;  // ARCHITECTURE.md: tag tracking <= 3 ms a frame
+
+double nowMs() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+double cpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+
+struct Take {
+  test::StudioFixture fx;
+  PropSet props;
+  std::vector<std::vector<cv::Mat>> frames;
+  Take() : props(test::studioProps(fx.studio)) {
+    for (int f = 0; f < kFrames; ++f) frames.push_back(fx.renderTake(2.0 + f / kFps, f, 24));
+  }
+};
+const Take& take() {
+  static const Take t;
+  return t;
+}
+
+struct Result {
+  std::string stage, size, extra;
+  std::vector<double> ms, cpu_ms;
+  double budget_ms = -1;
+  int threads = 1;
+};
+std::map<std::string, Result>& results() {
+  static std::map<std::string, Result> r;
+  return r;
+}
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+int benchThreads(const benchmark::State& state) {
+  return state.range(0) > 0 ? static_cast<int>(state.range(0))
+                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+// Tags found per frame per camera by the last full-frame and ROI runs (for the comparison).
+std::vector<std::vector<std::set<int>>> g_full_tags, g_roi_tags;
+
+void runTracker(benchmark::State& state, const std::string& key, const std::string& stage, bool roi, int full_every,
+                std::vector<std::vector<std::set<int>>>* tags) {
+  const Take& t = take();
+  const int threads = benchThreads(state);
+  for (auto _ : state) {
+    TrackerOptions o;
+    o.roi = roi;
+    o.full_frame_every = full_every;
+    o.threads = threads;
+    PropTracker tracker(t.fx.rig.cameras, t.props, o);
+    if (tags) tags->assign(kFrames, std::vector<std::set<int>>(t.frames[0].size()));
+    for (int f = 0; f < kFrames; ++f) {
+      const double w = nowMs(), c = cpuMs();
+      const TrackFrame r = tracker.track(f, 2.0 + f / kFps, t.frames[static_cast<size_t>(f)]);
+      const double ms = nowMs() - w, cpu = cpuMs() - c;
+      benchmark::DoNotOptimize(r.props.data());
+      // ROI cases: the first frame is the full-frame acquisition, not the ROI path.
+      if (!(roi && f == 0)) {
+        Result& res = results()[key + "_t" + std::to_string(threads)];
+        res.stage = stage;
+        res.size = "8x1280x720";
+        res.budget_ms = kBudgetMs;
+        res.threads = threads;
+        res.ms.push_back(ms);
+        res.cpu_ms.push_back(cpu);
+      }
+      if (tags) {
+        // Re-search the same regions to learn which ids each camera found (not timed).
+        for (size_t cam = 0; cam < r.search.size(); ++cam) {
+          TagDetector d{DetectorOptions{}};
+          for (const TagDetection& x : d.detect(t.frames[static_cast<size_t>(f)][cam], r.search[cam].rois))
+            (*tags)[static_cast<size_t>(f)][cam].insert(x.id);
+        }
+      }
+    }
+  }
+}
+
+void BM_TrackFullFrame(benchmark::State& state) {
+  runTracker(state, "1_full", "track_full_frame", false, 0, state.range(0) == 0 ? &g_full_tags : nullptr);
+}
+void BM_TrackRoi(benchmark::State& state) {
+  runTracker(state, "2_roi", "track_roi", true, 0, state.range(0) == 0 ? &g_roi_tags : nullptr);
+}
+void BM_TrackRoiPeriodicFull(benchmark::State& state) {
+  runTracker(state, "3_roi_full30", "track_roi_full_every_30", true, 30, nullptr);
+}
+
+void BM_Solve(benchmark::State& state) {
+  const Take& t = take();
+  std::vector<TagDetector> det;
+  for (size_t c = 0; c < t.frames[0].size(); ++c) det.emplace_back(DetectorOptions{});
+  std::vector<TagObservation> obs;
+  for (size_t c = 0; c < t.frames[0].size(); ++c)
+    for (const TagDetection& d : det[c].detect(t.frames[0][c])) {
+      const auto owner = t.props.findTag(d.family, d.id);
+      if (owner) obs.push_back(makeTagObservation(t.fx.rig.cameras[c].camera, static_cast<int>(c), owner->second, d.corners_px));
+    }
+  for (auto _ : state) {
+    const double w = nowMs(), c = cpuMs();
+    const PoseEstimate e = solvePropPose(t.fx.rig.cameras, t.props.props[0], obs, SolveOptions{});
+    benchmark::DoNotOptimize(e.T);
+    Result& res = results()["4_solve"];
+    res.stage = "joint_solve";
+    res.size = std::to_string(obs.size()) + " tags";
+    res.ms.push_back(nowMs() - w);
+    res.cpu_ms.push_back(cpuMs() - c);
+  }
+}
+
+void BM_Filter(benchmark::State& state) {
+  PoseFilter filter;
+  Eigen::Matrix<double, 6, 6> cov = 1e-8 * Eigen::Matrix<double, 6, 6>::Identity();
+  Pose T = Pose::Identity();
+  int f = 0;
+  for (auto _ : state) {
+    const double w = nowMs(), c = cpuMs();
+    T.translation().x() = 0.001 * f;
+    benchmark::DoNotOptimize(filter.update(f / kFps, T, cov));
+    ++f;
+    Result& res = results()["5_filter"];
+    res.stage = "filter_update";
+    res.size = "1 prop";
+    res.ms.push_back(nowMs() - w);
+    res.cpu_ms.push_back(cpuMs() - c);
+  }
+}
+
+}  // namespace
+
+BENCHMARK(BM_TrackFullFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(1);
+BENCHMARK(BM_TrackRoi)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_TrackRoiPeriodicFull)->Arg(0)->Unit(benchmark::kMillisecond)->Iterations(2);
+BENCHMARK(BM_Solve)->Unit(benchmark::kMillisecond)->Iterations(200);
+BENCHMARK(BM_Filter)->Unit(benchmark::kMicrosecond)->Iterations(10000);
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  take();  // render before timing
+  benchmark::RunSpecifiedBenchmarks();
+  std::map<int, double> full_ms;
+  for (const auto& [key, r] : results()) {
+    if (r.stage == "track_full_frame") full_ms[r.threads] = median(r.ms);
+  }
+  // Same tags: frames where every camera's ROI search found exactly the full-frame search's ids.
+  int same = 0, compared = 0;
+  if (!g_full_tags.empty() && g_full_tags.size() == g_roi_tags.size()) {
+    for (size_t f = 0; f < g_full_tags.size(); ++f) {
+      ++compared;
+      same += g_full_tags[f] == g_roi_tags[f] ? 1 : 0;
+    }
+  }
+  for (const auto& [key, r] : results()) {
+    std::printf("{\"stage\":\"%s\",\"size\":\"%s\",\"ms\":%.4f,\"ms_min\":%.4f,\"cpu_ms\":%.4f,\"threads\":%d", r.stage.c_str(),
+                r.size.c_str(), median(r.ms), *std::min_element(r.ms.begin(), r.ms.end()), median(r.cpu_ms), r.threads);
+    if (r.budget_ms > 0) std::printf(",\"budget_ms\":%.1f", r.budget_ms);
+    if (r.stage != "track_full_frame" && full_ms.count(r.threads) && r.stage.rfind("track_", 0) == 0)
+      std::printf(",\"speedup_vs_full_frame\":%.2f", full_ms[r.threads] / std::max(1e-9, median(r.ms)));
+    if (r.stage == "track_roi" && compared > 0)
+      std::printf(",\"same_tags_frames\":%d,\"frames\":%d,\"same_tags_fraction\":%.4f", same, compared,
+                  double(same) / compared);
+    std::printf("}\n");
+  }
+  return 0;
+}

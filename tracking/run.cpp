@@ -1,0 +1,371 @@
+// `previz track` and `previz track camera` over a take folder (see run.h).
+#include "tracking/run.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <regex>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/error.h"
+#include "core/io.h"
+
+namespace fs = std::filesystem;
+
+namespace previz::tracking {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+double maxOf(const std::vector<double>& v) { return v.empty() ? 0 : *std::max_element(v.begin(), v.end()); }
+
+fs::path framePath(const fs::path& take, const std::string& camera, int frame) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%06d.png", frame);
+  return take / "cams" / camera / name;
+}
+
+double takeFps(const fs::path& take, double given) {
+  if (given > 0) return given;
+  const fs::path tj = take / "take.json";
+  if (fs::exists(tj)) {
+    const nlohmann::json j = readJsonFile(tj);
+    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
+  }
+  return 24.0;
+}
+
+// truth/props.jsonl: frame -> prop id -> T_world_prop.
+std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
+  std::map<int, std::map<int, Pose>> out;
+  std::istringstream in(readTextFile(path));
+  int line_no = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++line_no;
+    if (line.empty()) continue;
+    ErrorContext c;
+    c.file = path.string();
+    c.field = "line " + std::to_string(line_no);
+    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("frame") || !j["frame"].is_number_integer() ||
+        !j.contains("props") || !j["props"].is_array())
+      throw Error("expected {\"frame\", \"props\": [{\"id\", \"T_world_prop\"}]}", c);
+    for (const auto& p : j["props"]) {
+      if (!p.is_object() || !p.contains("id") || !p["id"].is_number_integer() || !p.contains("T_world_prop"))
+        throw Error("expected props entries {\"id\", \"T_world_prop\"}", c);
+      try {
+        out[j["frame"].get<int>()][p["id"].get<int>()] = poseFromJson(p["T_world_prop"], "T_world_prop");
+      } catch (const Error& e) {
+        throw Error(e.message(), c);
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<int> selectFrames(const std::vector<int>& all, const TrackRunOptions& o) {
+  std::vector<int> out;
+  for (int f : all)
+    if (f >= o.first_frame && (o.end_frame < 0 || f < o.end_frame)) out.push_back(f);
+  return out;
+}
+
+}  // namespace
+
+void TrackRunOptions::validate() const {
+  tracker.validate();
+  ErrorContext c;
+  if (out.empty()) {
+    c.field = "--out";
+    throw Error("track: an output folder is required", c);
+  }
+  if (first_frame < 0 || (end_frame >= 0 && end_frame <= first_frame)) {
+    c.field = "--frames";
+    throw Error("track: frames must be A:B with 0 <= A < B", c);
+  }
+  if (fps < 0) {
+    c.field = "--fps";
+    throw Error("track: fps must be > 0", c);
+  }
+  if (!udp.empty()) parseHostPort(udp);
+}
+
+std::vector<int> takeFrames(const fs::path& take, const std::vector<std::string>& cameras) {
+  static const std::regex kFrame("^([0-9]{6})\\.png$");
+  std::vector<int> frames;
+  for (const std::string& cam : cameras) {
+    const fs::path dir = take / "cams" / cam;
+    if (!fs::is_directory(dir)) continue;
+    for (const auto& e : fs::directory_iterator(dir)) {
+      std::smatch m;
+      const std::string name = e.path().filename().string();
+      if (std::regex_match(name, m, kFrame)) frames.push_back(std::stoi(m[1]));
+    }
+  }
+  std::sort(frames.begin(), frames.end());
+  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+  return frames;
+}
+
+std::map<int, Pose> readPoseLines(const fs::path& path, const std::string& key) {
+  std::map<int, Pose> out;
+  std::istringstream in(readTextFile(path));
+  int line_no = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++line_no;
+    if (line.empty()) continue;
+    ErrorContext c;
+    c.file = path.string();
+    c.field = "line " + std::to_string(line_no);
+    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("frame") || !j["frame"].is_number_integer() ||
+        !j.contains(key))
+      throw Error("expected {\"frame\": integer, \"" + key + "\": {\"R\", \"t\"}}", c);
+    try {
+      out[j["frame"].get<int>()] = poseFromJson(j[key], key);
+    } catch (const Error& e) {
+      throw Error(e.message(), c);
+    }
+  }
+  return out;
+}
+
+TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
+                         const std::function<void(int, int)>& progress) {
+  o.validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  const Rig rig = readRig(in.rig);
+  const PropSet props = readProps(in.props);
+  std::vector<RigCamera> cams;
+  if (in.cameras.empty()) {
+    cams = rig.cameras;
+  } else {
+    for (const std::string& name : in.cameras) cams.push_back(rig.at(name));
+  }
+  std::map<int, Pose> moving;
+  int moving_index = -1;
+  if (!in.main_poses.empty()) {
+    moving = readPoseLines(in.main_poses);
+    for (size_t c = 0; c < cams.size(); ++c)
+      if (cams[c].camera.name == in.moving_camera) moving_index = static_cast<int>(c);
+  }
+  std::map<int, std::map<int, Pose>> truth;
+  if (!in.truth.empty()) truth = readPropTruth(in.truth);
+
+  TrackRunSummary s;
+  for (const RigCamera& rc : cams) s.cameras.push_back(rc.camera.name);
+  const std::vector<int> frames = selectFrames(takeFrames(in.take, s.cameras), o);
+  if (frames.empty()) {
+    ErrorContext c;
+    c.file = (in.take / "cams").string();
+    throw Error("track: no frames (cams/<camera>/%06d.png) for the selected cameras and frames", c);
+  }
+  const double fps = takeFps(in.take, o.fps);
+  PropTracker tracker(cams, props, o.tracker);
+  std::unique_ptr<PoseStreamer> streamer;
+  if (!o.udp.empty()) {
+    const auto [host, port] = parseHostPort(o.udp);
+    streamer = std::make_unique<PoseStreamer>(host, port, o.protocol, fps, "previz:" + in.take.filename().string());
+  }
+
+  struct Acc {
+    std::vector<double> sigma, pos, rot, mpos, mrot;
+  };
+  std::map<int, Acc> acc;
+  std::string lines;
+  const int n_cams = static_cast<int>(cams.size());
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const int f = frames[i];
+    std::vector<cv::Mat> images(cams.size());
+    std::vector<std::string> failures(cams.size());
+#pragma omp parallel for schedule(dynamic)
+    for (int c = 0; c < n_cams; ++c) {
+      const fs::path p = framePath(in.take, cams[static_cast<size_t>(c)].camera.name, f);
+      if (!fs::exists(p)) {
+        failures[static_cast<size_t>(c)] = "missing " + p.string();
+        continue;
+      }
+      images[static_cast<size_t>(c)] = cv::imread(p.string(), cv::IMREAD_COLOR);
+      if (images[static_cast<size_t>(c)].empty()) failures[static_cast<size_t>(c)] = "not an image: " + p.string();
+    }
+    for (int c = 0; c < n_cams; ++c)
+      if (!failures[static_cast<size_t>(c)].empty())
+        s.camera_failures.push_back("camera '" + cams[static_cast<size_t>(c)].camera.name + "': frame " +
+                                    std::to_string(f) + ": " + failures[static_cast<size_t>(c)]);
+    if (moving_index >= 0) {
+      const auto it = moving.find(f);
+      if (it != moving.end()) tracker.setCameraPose(moving_index, it->second);
+    }
+    const auto t_track = std::chrono::steady_clock::now();
+    const TrackFrame r = tracker.track(f, f / fps, images);
+    s.track_ms += msSince(t_track);
+    if (streamer) streamer->send(r);
+    lines += trackFrameToJson(r).dump() + "\n";
+    ++s.frames;
+    s.unknown_tags += r.unknown_tags;
+    s.full_frames += r.full_frame ? 1 : 0;
+    for (const CameraSearch& cs : r.search)
+      if (!cs.failure.empty() && cs.failure != "no image")
+        s.camera_failures.push_back("camera '" + cs.camera + "': frame " + std::to_string(f) + ": " + cs.failure);
+    for (const PropResult& p : r.props) {
+      Acc& a = acc[p.id];
+      if (!p.tracked) continue;
+      a.sigma.push_back(1e3 * p.measured.sigma_position_m);
+      const auto tf = truth.find(f);
+      if (tf == truth.end()) continue;
+      const auto tp = tf->second.find(p.id);
+      if (tp == tf->second.end()) continue;
+      a.pos.push_back(1e3 * translationDistance(p.T_world_prop, tp->second));
+      a.rot.push_back(rotationDistance(p.T_world_prop, tp->second) * 180 / M_PI);
+      a.mpos.push_back(1e3 * translationDistance(p.measured.T, tp->second));
+      a.mrot.push_back(rotationDistance(p.measured.T, tp->second) * 180 / M_PI);
+    }
+    if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
+  }
+  for (const PropDef& def : props.props) {
+    if (def.T_world_prop) continue;
+    PropRunSummary ps;
+    ps.id = def.id;
+    ps.name = def.name;
+    const Acc& a = acc[def.id];
+    ps.tracked = static_cast<int>(a.sigma.size());
+    ps.lost = s.frames - ps.tracked;
+    ps.median_sigma_position_mm = median(a.sigma);
+    ps.truth_frames = static_cast<int>(a.pos.size());
+    ps.median_position_error_mm = median(a.pos);
+    ps.max_position_error_mm = maxOf(a.pos);
+    ps.median_rotation_error_deg = median(a.rot);
+    ps.max_rotation_error_deg = maxOf(a.rot);
+    ps.median_measured_position_error_mm = median(a.mpos);
+    ps.median_measured_rotation_error_deg = median(a.mrot);
+    s.props.push_back(ps);
+  }
+  if (streamer) {
+    s.packets_sent = streamer->sent();
+    s.packets_failed = streamer->failed();
+  }
+  s.poses = o.out / "poses.jsonl";
+  writeFileAtomic(s.poses, lines);
+  s.ms = msSince(t0);
+  return s;
+}
+
+CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOptions& o,
+                                  const std::function<void(int, int)>& progress) {
+  o.validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  const Rig rig = readRig(in.rig);
+  const RigCamera& rc = rig.at(in.camera);
+  const PropSet set = readProps(in.tags);
+  // Every studio tag in one world-fixed set.
+  PropDef studio;
+  studio.name = "studio tags";
+  studio.T_world_prop = Pose::Identity();
+  for (const PropDef& p : set.props) {
+    if (!p.T_world_prop) continue;
+    for (TagDef t : p.tags) {
+      t.T_prop_tag = *p.T_world_prop * t.T_prop_tag;
+      studio.tags.push_back(t);
+    }
+  }
+  if (studio.tags.empty()) {
+    ErrorContext c;
+    c.file = in.tags.string();
+    throw Error("track camera: no prop with T_world_prop (studio tags fixed in the world) in this file", c);
+  }
+  PropSet lookup;
+  lookup.props.push_back(studio);
+  std::map<int, Pose> truth;
+  if (!in.truth.empty()) truth = readPoseLines(in.truth);
+  const std::vector<int> frames = selectFrames(takeFrames(in.take, {in.camera}), o);
+  if (frames.empty()) {
+    ErrorContext c;
+    c.file = (in.take / "cams" / in.camera).string();
+    c.camera = in.camera;
+    throw Error("track camera: no frames %06d.png", c);
+  }
+  const double fps = takeFps(in.take, o.fps);
+  DetectorOptions d = o.tracker.detector;
+  const auto it = o.tracker.per_camera.find(in.camera);
+  if (it != o.tracker.per_camera.end()) d = it->second;
+  d.families = set.families();
+  TagDetector detector(d);
+  PoseFilter filter(o.tracker.filter);
+  CameraTrackSummary s;
+  std::vector<double> sigma, pos, rot;
+  std::string lines;
+  bool live = false;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const int f = frames[i];
+    const cv::Mat img = readImage(framePath(in.take, in.camera, f), cv::IMREAD_COLOR);
+    std::vector<TagObservation> obs;
+    int unknown = 0;
+    for (const TagDetection& det : detector.detect(img)) {
+      const auto owner = lookup.findTag(det.family, det.id);
+      if (!owner) {
+        ++unknown;
+        continue;
+      }
+      obs.push_back(makeTagObservation(rc.camera, 0, owner->second, det.corners_px));
+    }
+    const double t = f / fps;
+    Pose prior;
+    const bool has_prior = live && filter.initialised();
+    if (has_prior) prior = filter.predict(t);
+    const PoseEstimate e = obs.empty() ? PoseEstimate{} : solveCameraPose(rc.camera, studio, obs, o.tracker.solve,
+                                                                          has_prior ? &prior : nullptr);
+    nlohmann::json j = {{"frame", f}, {"time_s", t}, {"camera", in.camera}, {"unknown_tags", unknown}};
+    ++s.frames;
+    if (e.ok && e.sigma_position_m <= o.tracker.max_sigma_position_m) {
+      if (!live) filter.reset();
+      const Pose T = o.tracker.filter_enabled ? filter.update(t, e.T, e.covariance) : e.T;
+      live = true;
+      ++s.solved;
+      j["state"] = "tracked";
+      j["T_world_cam"] = poseToJson(T);
+      j["T_world_cam_measured"] = poseToJson(e.T);
+      j["sigma_position_mm"] = 1e3 * e.sigma_position_m;
+      j["sigma_rotation_deg"] = e.sigma_rotation_rad * 180 / M_PI;
+      j["rms_px"] = e.rms_px;
+      j["tags"] = e.tags;
+      j["corners"] = e.inliers;
+      sigma.push_back(1e3 * e.sigma_position_m);
+      const auto tt = truth.find(f);
+      if (tt != truth.end()) {
+        pos.push_back(1e3 * translationDistance(e.T, tt->second));
+        rot.push_back(rotationDistance(e.T, tt->second) * 180 / M_PI);
+      }
+    } else {
+      live = false;
+      j["state"] = "lost";
+      j["reason"] = obs.empty() ? std::string("no studio tag seen") : e.failure.empty() ? "pose too uncertain" : e.failure;
+    }
+    lines += j.dump() + "\n";
+    if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
+  }
+  s.median_sigma_position_mm = median(sigma);
+  s.truth_frames = static_cast<int>(pos.size());
+  s.median_position_error_mm = median(pos);
+  s.max_position_error_mm = maxOf(pos);
+  s.median_rotation_error_deg = median(rot);
+  s.max_rotation_error_deg = maxOf(rot);
+  s.poses = o.out / "camera_poses.jsonl";
+  writeFileAtomic(s.poses, lines);
+  s.ms = msSince(t0);
+  return s;
+}
+
+}  // namespace previz::tracking

@@ -1,0 +1,294 @@
+// The prop tracking loop (see tracker.h).
+#include "tracking/tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include "core/error.h"
+
+namespace previz::tracking {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+void TrackerOptions::validate() const {
+  detector.validate();
+  for (const auto& [name, d] : per_camera) {
+    try {
+      d.validate();
+    } catch (const Error& e) {
+      ErrorContext c = e.context();
+      c.camera = name;
+      throw Error(e.message(), c);
+    }
+  }
+  solve.validate();
+  filter.validate();
+  auto bad = [](const std::string& f, const std::string& what) {
+    ErrorContext c;
+    c.field = f;
+    throw Error("track: " + what, c);
+  };
+  if (full_frame_every < 0) bad("full_frame_every", "full_frame_every must be >= 0");
+  if (!(roi_margin_px >= 0)) bad("roi_margin_px", "roi_margin_px must be >= 0");
+  if (!(roi_margin_fraction >= 0)) bad("roi_margin_fraction", "roi_margin_fraction must be >= 0");
+  if (!(max_sigma_position_m > 0)) bad("max_sigma_position_m", "max_sigma_position_m must be > 0");
+  if (threads < 0) bad("threads", "threads must be >= 0");
+}
+
+struct PropTracker::Impl {
+  std::vector<RigCamera> cameras;
+  PropSet props;
+  std::vector<int> tracked_props;  // indices into props.props (carried props)
+  TrackerOptions options;
+  std::vector<TagDetector> detectors;
+  struct Track {
+    PoseFilter filter;
+    bool live = false;
+    Pose last = Pose::Identity();
+    double last_time_s = 0;
+  };
+  std::vector<Track> tracks;  // per tracked prop
+  int frames_since_full = 0;
+  bool any_frame = false;
+
+  // Regions of camera c where the tracked props should appear at time_s.
+  std::vector<cv::Rect> predictedRois(int c, double time_s) const {
+    const RigCamera& rc = cameras[static_cast<size_t>(c)];
+    const Pose T_cam_world = rc.T_world_cam.inverse();
+    std::vector<cv::Rect> rois;
+    for (size_t k = 0; k < tracked_props.size(); ++k) {
+      const Track& tr = tracks[k];
+      const Pose T = tr.filter.initialised() ? tr.filter.predict(time_s) : tr.last;
+      double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
+      int n = 0;
+      for (const TagDef& tag : props.props[static_cast<size_t>(tracked_props[k])].tags)
+        for (const Eigen::Vector3d& X : tag.cornersInProp()) {
+          const auto px = rc.camera.project(T_cam_world * (T * X));
+          if (!px) continue;
+          u0 = std::min(u0, px->x());
+          v0 = std::min(v0, px->y());
+          u1 = std::max(u1, px->x());
+          v1 = std::max(v1, px->y());
+          ++n;
+        }
+      if (n == 0) continue;
+      const double m = options.roi_margin_px + options.roi_margin_fraction * std::max(u1 - u0, v1 - v0);
+      const cv::Rect r(cv::Point(static_cast<int>(std::floor(u0 - m)), static_cast<int>(std::floor(v0 - m))),
+                       cv::Point(static_cast<int>(std::ceil(u1 + m)) + 1, static_cast<int>(std::ceil(v1 + m)) + 1));
+      const cv::Rect clipped = r & cv::Rect(0, 0, rc.camera.width, rc.camera.height);
+      if (clipped.area() > 0) rois.push_back(clipped);
+    }
+    return rois;
+  }
+};
+
+PropTracker::PropTracker(std::vector<RigCamera> cameras, PropSet props, const TrackerOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  options.validate();
+  props.validate();
+  if (cameras.empty()) throw Error("track: no cameras to track from");
+  for (const auto& [name, d] : options.per_camera) {
+    bool found = false;
+    for (const RigCamera& rc : cameras) found = found || rc.camera.name == name;
+    if (!found) {
+      ErrorContext c;
+      c.camera = name;
+      throw Error("track: detector settings for a camera that is not tracked from", c);
+    }
+  }
+  impl_->cameras = std::move(cameras);
+  impl_->props = std::move(props);
+  impl_->options = options;
+  const std::vector<std::string> families = impl_->props.families();
+  for (const RigCamera& rc : impl_->cameras) {
+    DetectorOptions d = options.detector;
+    const auto it = options.per_camera.find(rc.camera.name);
+    if (it != options.per_camera.end()) d = it->second;
+    d.families = families;
+    impl_->detectors.emplace_back(d);
+  }
+  for (size_t p = 0; p < impl_->props.props.size(); ++p)
+    if (!impl_->props.props[p].T_world_prop) {
+      impl_->tracked_props.push_back(static_cast<int>(p));
+      impl_->tracks.push_back({PoseFilter(options.filter)});
+    }
+}
+
+PropTracker::~PropTracker() = default;
+
+const std::vector<RigCamera>& PropTracker::cameras() const { return impl_->cameras; }
+const PropSet& PropTracker::props() const { return impl_->props; }
+const TrackerOptions& PropTracker::options() const { return impl_->options; }
+
+void PropTracker::setCameraPose(int camera, const Pose& T_world_cam) {
+  if (camera < 0 || camera >= static_cast<int>(impl_->cameras.size()))
+    throw Error("track: camera index " + std::to_string(camera) + " out of range");
+  impl_->cameras[static_cast<size_t>(camera)].T_world_cam = T_world_cam;
+}
+
+void PropTracker::reset() {
+  for (auto& t : impl_->tracks) {
+    t.filter.reset();
+    t.live = false;
+  }
+  impl_->any_frame = false;
+}
+
+TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Mat>& images) {
+  Impl& m = *impl_;
+  const auto t_start = std::chrono::steady_clock::now();
+  const int n_cams = static_cast<int>(m.cameras.size());
+  if (static_cast<int>(images.size()) != n_cams)
+    throw Error("track: " + std::to_string(images.size()) + " images for " + std::to_string(n_cams) +
+                    " cameras",
+                ErrorContext{"", "", frame, ""});
+  TrackFrame out;
+  out.frame = frame;
+  out.time_s = time_s;
+  out.search.resize(static_cast<size_t>(n_cams));
+
+  bool all_live = !m.tracks.empty();
+  for (const auto& t : m.tracks) all_live = all_live && t.live;
+  const bool periodic = m.options.full_frame_every > 0 && m.frames_since_full + 1 >= m.options.full_frame_every;
+  const bool full = !m.options.roi || !m.any_frame || !all_live || periodic;
+  out.full_frame = full;
+  m.frames_since_full = full ? 0 : m.frames_since_full + 1;
+  m.any_frame = true;
+
+  // Detection, one camera per iteration; errors are recorded per camera (STYLE.md rule 11).
+  std::vector<std::vector<TagDetection>> found(static_cast<size_t>(n_cams));
+  const auto t_detect = std::chrono::steady_clock::now();
+  const int threads = m.options.threads;
+#pragma omp parallel for schedule(dynamic) num_threads(threads > 0 ? threads : omp_get_max_threads())
+  for (int c = 0; c < n_cams; ++c) {
+    CameraSearch& s = out.search[static_cast<size_t>(c)];
+    s.camera = m.cameras[static_cast<size_t>(c)].camera.name;
+    try {
+      const cv::Mat& img = images[static_cast<size_t>(c)];
+      const Camera& cam = m.cameras[static_cast<size_t>(c)].camera;
+      if (img.empty()) {
+        s.failure = "no image";
+        continue;
+      }
+      if (img.cols != cam.width || img.rows != cam.height) {
+        s.failure = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", camera is " +
+                    std::to_string(cam.width) + "x" + std::to_string(cam.height);
+        continue;
+      }
+      s.full_frame = full;
+      s.rois = full ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
+      for (const cv::Rect& r : s.rois) s.pixels += r.area();
+      found[static_cast<size_t>(c)] = m.detectors[static_cast<size_t>(c)].detect(img, s.rois);
+      s.detections = static_cast<int>(found[static_cast<size_t>(c)].size());
+    } catch (const std::exception& e) {
+      s.failure = e.what();
+    }
+  }
+  out.detect_ms = msSince(t_detect);
+
+  // Tags -> props.
+  const auto t_solve = std::chrono::steady_clock::now();
+  std::vector<std::vector<TagObservation>> obs(m.props.props.size());
+  for (int c = 0; c < n_cams; ++c)
+    for (const TagDetection& d : found[static_cast<size_t>(c)]) {
+      const auto owner = m.props.findTag(d.family, d.id);
+      if (!owner) {
+        ++out.unknown_tags;
+        continue;
+      }
+      obs[static_cast<size_t>(owner->first)].push_back(
+          makeTagObservation(m.cameras[static_cast<size_t>(c)].camera, c, owner->second, d.corners_px));
+    }
+
+  for (size_t k = 0; k < m.tracked_props.size(); ++k) {
+    const int p = m.tracked_props[k];
+    const PropDef& def = m.props.props[static_cast<size_t>(p)];
+    Impl::Track& tr = m.tracks[k];
+    PropResult r;
+    r.id = def.id;
+    r.name = def.name;
+    const std::vector<TagObservation>& o = obs[static_cast<size_t>(p)];
+    if (o.empty()) {
+      r.measured.failure = "no tag of this prop seen";
+    } else {
+      Pose prior;
+      const bool has_prior = tr.live && tr.filter.initialised();
+      if (has_prior) prior = tr.filter.predict(time_s);
+      r.measured = solvePropPose(m.cameras, def, o, m.options.solve, has_prior ? &prior : nullptr);
+      if (r.measured.ok && r.measured.sigma_position_m > m.options.max_sigma_position_m) {
+        r.measured.ok = false;
+        r.measured.failure = "pose too uncertain (sigma " + std::to_string(r.measured.sigma_position_m) + " m)";
+      }
+    }
+    if (r.measured.ok) {
+      r.tracked = true;
+      r.reacquired = !tr.live;
+      if (!tr.live) tr.filter.reset();
+      r.T_world_prop = m.options.filter_enabled ? tr.filter.update(time_s, r.measured.T, r.measured.covariance)
+                                                : r.measured.T;
+      for (int c : r.measured.cameras) r.cameras.push_back(m.cameras[static_cast<size_t>(c)].camera.name);
+      tr.live = true;
+      tr.last = r.T_world_prop;
+      tr.last_time_s = time_s;
+    } else {
+      tr.live = false;  // lost: no pose reported, the filter restarts on reacquisition
+    }
+    out.props.push_back(std::move(r));
+  }
+  out.solve_ms = msSince(t_solve);
+  out.total_ms = msSince(t_start);
+  return out;
+}
+
+nlohmann::json trackFrameToJson(const TrackFrame& f) {
+  nlohmann::json props = nlohmann::json::array();
+  for (const PropResult& r : f.props) {
+    nlohmann::json j = {{"id", r.id}, {"name", r.name}, {"state", r.tracked ? "tracked" : "lost"}};
+    if (r.tracked) {
+      j["T_world_prop"] = poseToJson(r.T_world_prop);
+      j["T_world_prop_measured"] = poseToJson(r.measured.T);
+      j["sigma_position_mm"] = 1e3 * r.measured.sigma_position_m;
+      j["sigma_rotation_deg"] = r.measured.sigma_rotation_rad * 180.0 / M_PI;
+      j["rms_px"] = r.measured.rms_px;
+      j["cameras"] = r.cameras;
+      j["tags"] = r.measured.tags;
+      j["corners"] = r.measured.inliers;
+      j["outliers"] = r.measured.corners - r.measured.inliers;
+      j["ambiguity_ratio"] = std::isfinite(r.measured.ambiguity_ratio) ? nlohmann::json(r.measured.ambiguity_ratio)
+                                                                       : nlohmann::json(nullptr);
+      j["reacquired"] = r.reacquired;
+    } else {
+      j["reason"] = r.measured.failure;
+    }
+    props.push_back(j);
+  }
+  nlohmann::json failures = nlohmann::json::array();
+  int rois = 0;
+  long long pixels = 0;
+  for (const CameraSearch& s : f.search) {
+    rois += static_cast<int>(s.rois.size());
+    pixels += s.pixels;
+    if (!s.failure.empty()) failures.push_back({{"camera", s.camera}, {"reason", s.failure}});
+  }
+  return {{"frame", f.frame},
+          {"time_s", f.time_s},
+          {"props", props},
+          {"unknown_tags", f.unknown_tags},
+          {"full_frame", f.full_frame},
+          {"rois", rois},
+          {"searched_pixels", pixels},
+          {"camera_failures", failures},
+          {"ms", {{"detect", f.detect_ms}, {"solve", f.solve_ms}, {"total", f.total_ms}}}};
+}
+
+}  // namespace previz::tracking

@@ -18,5 +18,9 @@ Runner addRigCommand(CLI::App& app);
 // `previz calib lens`, registered under the calib command.
 Runner addLensCommand(CLI::App& calib);
 Runner addCarveCommand(CLI::App& app);
+Runner addCompositeCommand(CLI::App& app);
+Runner addRunCommand(CLI::App& app);
+// `previz bench run` (the bench command with its verbs).
+Runner addBenchCommand(CLI::App& app);
 
 }  // namespace previz::app

@@ -1,0 +1,130 @@
+#pragma once
+// The live previz frame behind `previz run` and `previz bench run`: per frame a list of stages,
+// each timed, run in order on one FrameState:
+//   key       every camera keyed (witnesses: silhouette; main: soft alpha + despill), in
+//             parallel over cameras, one Keyer per camera kept across frames
+//   carve     visual hull from the witness silhouettes (carving/hull.h)
+//   depth     the hull's depth for the main camera at this frame's pose, inside its key
+//   composite keyed main plate over the CG frame, depth-aware (composite/compositor.h)
+// One frame is a function of (rig, camera frames, CG frame) plus the keyers' per-camera screen
+// models (ARCHITECTURE.md): the loop holds no other state between frames. Reading inputs and
+// writing outputs are the caller's (files, VideoCapture); they are timed by the caller.
+// A stage can be inserted after any other (insertStage), e.g. prop tracking after "depth"; a
+// stage reads and writes FrameState.
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "carving/hull.h"
+#include "carving/keyer.h"
+#include "carving/take.h"
+#include "composite/compositor.h"
+#include "composite/output.h"
+#include "core/rig.h"
+
+namespace previz::app {
+
+struct FrameLoopOptions {
+  carving::HullOptions hull;
+  carving::KeyerOptions keyer;              // for every camera (soft_alpha set per role)
+  composite::CompositeOptions composite;
+  std::string main_camera;                  // "" = the rig's camera with role "main"
+  std::vector<std::string> carve_cameras;   // empty = every witness
+  bool debug_layers = false;                // fill CompositeResult's layers
+  int threads = 0;                          // OpenMP threads (0 = default)
+  void validate() const;                    // throws Error naming the field
+};
+
+// Everything one frame carries through the stages.
+struct FrameState {
+  int frame = 0;
+  // Inputs (the caller fills them): one plate per carving camera (CV_8UC3; empty = the camera
+  // is dropped for this frame, with its reason in 'dropped'), the main plate, the main camera at
+  // this frame (pose, lens state) and the CG frame.
+  std::vector<cv::Mat> witness_plates;
+  std::vector<std::string> dropped;          // one per carving camera, "" = used
+  cv::Mat main_plate;
+  RigCamera main;
+  composite::CgFrame cg;
+  // Stage results.
+  std::vector<cv::Mat> silhouettes;          // carving cameras
+  carving::KeyResult main_key;
+  cv::Mat foreground;                        // despilled main plate
+  carving::VisualHull hull;
+  cv::Mat main_depth;                        // CV_32FC1, +inf outside the hull / key
+  composite::CompositeResult composite;
+};
+
+struct StageTime {
+  std::string stage;
+  double ms = 0;
+};
+
+class FrameLoop {
+ public:
+  using StageFn = std::function<void(FrameState&)>;
+
+  // cg: the engine's pinhole (cg/camera.json); main: the main camera's lens at the start (its
+  // per-frame state comes with each FrameState; the CG distortion map is rebuilt when it
+  // changes). Throws Error naming the camera or option.
+  FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& options);
+  ~FrameLoop();
+  FrameLoop(const FrameLoop&) = delete;
+  FrameLoop& operator=(const FrameLoop&) = delete;
+
+  const std::vector<std::string>& carveCameras() const;
+  const std::string& mainCamera() const;
+  std::vector<std::string> stages() const;
+  const carving::Carver& carver() const;
+  const composite::Compositor& compositor() const;
+  // Adds a stage after the one named (throws Error naming 'after' when there is none).
+  void insertStage(const std::string& after, const std::string& name, StageFn fn);
+
+  // Runs every stage on the state; returns each stage's wall time in order. Throws Error naming
+  // the frame (and camera) when a stage fails; a dropped witness only leaves the carve.
+  std::vector<StageTime> run(FrameState& state);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Inputs of one frame from a take folder (carving/take.h: plates, rig, main poses) and its CG
+// (composite/output.h readCgFrame).
+struct TakeInputOptions {
+  std::filesystem::path cg_dir;     // <take>/cg by default
+  // The main camera's intrinsics for the current lens state (a lens-table entry, already at the
+  // plate's size); nullopt = the rig's.
+  std::optional<Camera> main_lens;
+  // false: the take's main poses are world poses (truth/main_poses.jsonl with the true rig).
+  // true: they are the camera tracker's motion, applied relative to their first frame onto the
+  // rig's main pose (T_world_main(f) = T_world_main(rig) T_pose(first)^-1 T_pose(f)); that is how
+  // a rig previz calibrated itself (in its own world frame) meets a tracked camera.
+  bool relative_main_poses = false;
+};
+
+class TakeReader {
+ public:
+  TakeReader(const carving::Take& take, const FrameLoop& loop, const TakeInputOptions& options);
+  // The main camera at a frame: pose (see relative_main_poses) and lens.
+  RigCamera mainAt(int frame) const;
+  // Reads every plate (in parallel over cameras) and the CG frame into s (stage outputs are
+  // left as they are). A missing or bad witness frame drops that camera (s.dropped); a missing
+  // main plate or CG frame throws Error naming the file and the frame.
+  void read(int frame, FrameState& s) const;
+
+ private:
+  const carving::Take& take_;
+  std::vector<std::string> carve_names_;
+  std::string main_name_;
+  Camera cg_;
+  TakeInputOptions options_;
+  Pose T_first_inv_ = Pose::Identity();
+};
+
+}  // namespace previz::app

@@ -50,7 +50,7 @@ std::string stem(int frame) {
 struct LoopArgs {
   std::string rig, main_poses, lens, cg_dir;
   double focus = 0, zoom = 0;
-  bool relative_main_poses = false;
+  std::string tracked_main_poses;
   double voxel_m = 0.005;
   int k = 0;
   double band_m = 0.04;
@@ -64,9 +64,9 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--main-poses", a.main_poses,
                   "JSON lines {frame, T_world_cam} of the moving main camera (default: the take's "
                   "truth/main_poses.jsonl when it exists)");
-  cmd->add_flag("--relative-main-poses", a.relative_main_poses,
-                "Main poses are the camera tracker's motion: applied relative to their first frame onto "
-                "the rig's main pose (use with a rig calibrated in its own world frame)");
+  cmd->add_option("--tracked-main-poses", a.tracked_main_poses,
+                  "Camera tracker's JSON lines {frame, T_main0_main}: the main camera's motion from its pose "
+                  "in the rig (where it stood at rig calibration); replaces --main-poses");
   cmd->add_option("--lens", a.lens, "Lens table (lens/<lens>.json) for the main camera's intrinsics");
   cmd->add_option("--focus", a.focus, "Focus encoder value for --lens")->capture_default_str();
   cmd->add_option("--zoom", a.zoom, "Zoom encoder value for --lens")->capture_default_str();
@@ -92,7 +92,8 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   src.take_dir = take_dir;
   src.rig_path = a.rig.empty() ? take_dir / "truth" / "rig.json" : fs::path(a.rig);
   if (!a.main_poses.empty()) src.main_poses = a.main_poses;
-  else if (fs::exists(take_dir / "truth" / "main_poses.jsonl")) src.main_poses = take_dir / "truth" / "main_poses.jsonl";
+  else if (a.tracked_main_poses.empty() && fs::exists(take_dir / "truth" / "main_poses.jsonl"))
+    src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   l.take = std::make_unique<carving::Take>(src);
   const fs::path cg_dir = a.cg_dir.empty() ? take_dir / "cg" : fs::path(a.cg_dir);
   const Camera cg = composite::readCgCamera(cg_dir / "camera.json");
@@ -107,7 +108,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   Rig rig = l.take->rig();
   TakeInputOptions io;
   io.cg_dir = cg_dir;
-  io.relative_main_poses = a.relative_main_poses;
+  io.tracked_main_poses = a.tracked_main_poses;
   if (!a.lens.empty()) {
     const calib::LensTable table = calib::readLensTable(a.lens);
     const calib::LensTableEntry e = table.at(a.focus, a.zoom);

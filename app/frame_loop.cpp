@@ -5,8 +5,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <sstream>
 
 #include "core/error.h"
+#include "core/io.h"
+#include "core/pose.h"
 
 namespace previz::app {
 namespace {
@@ -199,17 +202,39 @@ TakeReader::TakeReader(const carving::Take& take, const FrameLoop& loop, const T
                   c);
     }
   }
-  if (options_.relative_main_poses) {
-    if (!take.hasMainPoses() || take.frames().empty())
-      throw Error("run: relative main poses need a main poses file", fieldContext("main_poses"));
-    T_first_inv_ = take.cameraAt(main_name_, take.frames().front()).T_world_cam.inverse();
+  if (!options_.tracked_main_poses.empty()) {
+    const std::string text = readTextFile(options_.tracked_main_poses);
+    std::istringstream in(text);
+    int line_no = 0;
+    for (std::string line; std::getline(in, line);) {
+      ++line_no;
+      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+      ErrorContext c;
+      c.file = options_.tracked_main_poses.string();
+      try {
+        const nlohmann::json j = nlohmann::json::parse(line);
+        tracked_[j.at("frame").get<int>()] = poseFromJson(j.at("T_main0_main"), "T_main0_main");
+      } catch (const std::exception& e) {
+        c.field = "line " + std::to_string(line_no);
+        throw Error(std::string("bad tracked main pose: ") + e.what(), c);
+      }
+    }
   }
 }
 
 RigCamera TakeReader::mainAt(int frame) const {
   RigCamera rc = take_.cameraAt(main_name_, frame);
-  if (options_.relative_main_poses)
-    rc.T_world_cam = take_.rig().at(main_name_).T_world_cam * T_first_inv_ * rc.T_world_cam;
+  if (!options_.tracked_main_poses.empty()) {
+    const auto it = tracked_.find(frame);
+    if (it == tracked_.end()) {
+      ErrorContext c;
+      c.file = options_.tracked_main_poses.string();
+      c.camera = main_name_;
+      c.frame = frame;
+      throw Error("no tracked pose of the main camera for this frame", c);
+    }
+    rc.T_world_cam = take_.rig().at(main_name_).T_world_cam * it->second;
+  }
   if (options_.main_lens) {
     const std::string name = rc.camera.name;
     rc.camera = *options_.main_lens;

@@ -13,6 +13,7 @@
 // stage reads and writes FrameState.
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <memory>
 #include <string>
@@ -101,17 +102,18 @@ struct TakeInputOptions {
   // The main camera's intrinsics for the current lens state (a lens-table entry, already at the
   // plate's size); nullopt = the rig's.
   std::optional<Camera> main_lens;
-  // false: the take's main poses are world poses (truth/main_poses.jsonl with the true rig).
-  // true: they are the camera tracker's motion, applied relative to their first frame onto the
-  // rig's main pose (T_world_main(f) = T_world_main(rig) T_pose(first)^-1 T_pose(f)); that is how
-  // a rig previz calibrated itself (in its own world frame) meets a tracked camera.
-  bool relative_main_poses = false;
+  // The camera tracker's poses of the main camera, JSON lines {"frame", "T_main0_main"}: its
+  // motion from where it stood when the rig was calibrated (the tracker is zeroed there). When
+  // given, T_world_main(f) = T_world_main(rig) T_main0_main(f), and every frame read must be
+  // listed. That is how a rig previz calibrated itself, in its own world frame, meets a tracked
+  // camera. Empty: the take's main poses (world poses, carving/take.h) or the rig's.
+  std::filesystem::path tracked_main_poses;
 };
 
 class TakeReader {
  public:
   TakeReader(const carving::Take& take, const FrameLoop& loop, const TakeInputOptions& options);
-  // The main camera at a frame: pose (see relative_main_poses) and lens.
+  // The main camera at a frame: pose (see tracked_main_poses) and lens.
   RigCamera mainAt(int frame) const;
   // Reads every plate (in parallel over cameras) and the CG frame into s (stage outputs are
   // left as they are). A missing or bad witness frame drops that camera (s.dropped); a missing
@@ -124,7 +126,7 @@ class TakeReader {
   std::string main_name_;
   Camera cg_;
   TakeInputOptions options_;
-  Pose T_first_inv_ = Pose::Identity();
+  std::map<int, Pose> tracked_;
 };
 
 }  // namespace previz::app

@@ -128,13 +128,28 @@ bool Compositor::setLens(const Camera& lens) {
 void Compositor::build() {
   map_ = makeDistortMap(lens_, cg_);
   int outside = 0;
-  const float w = static_cast<float>(cg_.width), h = static_cast<float>(cg_.height);
+  const int CW = cg_.width, CH = cg_.height;
+  taps_.assign(static_cast<size_t>(lens_.width) * lens_.height, Tap{});
   for (int v = 0; v < map_.map.rows; ++v) {
     const cv::Vec2f* m = map_.map.ptr<cv::Vec2f>(v);
     for (int u = 0; u < map_.map.cols; ++u) {
       const float sx = m[u][0], sy = m[u][1];
       if (sx == -1.f && sy == -1.f) continue;  // not invertible, counted by the map
-      if (sx < -0.5f || sy < -0.5f || sx > w - 0.5f || sy > h - 0.5f) ++outside;
+      if (sx < -0.5f || sy < -0.5f || sx > CW - 0.5f || sy > CH - 0.5f) {
+        ++outside;
+        continue;
+      }
+      // Within half a pixel of the border: the border pixel (clamped), then the 2 x 2 block that
+      // holds the point, its origin kept inside the image.
+      const float x = std::clamp(sx, 0.f, CW - 1.f), y = std::clamp(sy, 0.f, CH - 1.f);
+      const int x0 = std::min(static_cast<int>(x), std::max(CW - 2, 0));
+      const int y0 = std::min(static_cast<int>(y), std::max(CH - 2, 0));
+      Tap& t = taps_[static_cast<size_t>(v) * lens_.width + u];
+      t.index = y0 * CW + x0;
+      // Weights in 1/256, at most 255: a point on the far pixel's centre (the last column or
+      // row) is read 1/256 px short of it.
+      t.wx = static_cast<std::uint8_t>(std::min(255, static_cast<int>((x - x0) * 256.f + 0.5f)));
+      t.wy = static_cast<std::uint8_t>(std::min(255, static_cast<int>((y - y0) * 256.f + 0.5f)));
     }
   }
   outside_cg_ = outside;
@@ -180,13 +195,18 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
   const float band = static_cast<float>(options_.depth_band_m);
   const int fill = options_.edge_fill_px;
   const cv::Vec3f outside = options_.outside_rgb;
-  const float max_x = CW - 1.f, max_y = CH - 1.f;
+  // The CG images as flat arrays (continuous: EXR reads and cv::Mat creates are).
+  const cv::Mat cg_color = in.cg_color.isContinuous() ? in.cg_color : in.cg_color.clone();
+  const cv::Mat cg_depth = in.cg_depth.isContinuous() ? in.cg_depth : in.cg_depth.clone();
+  const float* cg_rgb = cg_color.ptr<float>();
+  const float* cg_z = cg_depth.ptr<float>();
+  const int dx1 = CW > 1 ? 1 : 0, dy1 = CH > 1 ? CW : 0;  // neighbour offsets (pixels)
 
   long long actor_px = 0, actor_front = 0, cg_front = 0, filled = 0, fallback = 0;
 #pragma omp parallel for schedule(static, 16) num_threads(threadCount(options_.threads)) \
     reduction(+ : actor_px, actor_front, cg_front, filled, fallback)
   for (int v = 0; v < H; ++v) {
-    const cv::Vec2f* m = map_.map.ptr<cv::Vec2f>(v);
+    const Tap* tap_row = taps_.data() + static_cast<size_t>(v) * W;
     const std::uint8_t* f = in.foreground.ptr<std::uint8_t>(v);
     const float* al = in.alpha.ptr<float>(v);
     const float* za_row = in.actor_depth.ptr<float>(v);
@@ -194,29 +214,24 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
     for (int u = 0; u < W; ++u) {
       // CG through the lens: bilinear colour, nearest depth (a blend of depths across the
       // pillar's edge would be a depth that exists nowhere).
-      const float sx = m[u][0], sy = m[u][1];
+      const Tap t = tap_row[u];
       float cb, cgc, cr, zc;
-      if (sx < -0.5f || sy < -0.5f || sx > CW - 0.5f || sy > CH - 0.5f) {
+      if (t.index < 0) {
         cb = outside[0];
         cgc = outside[1];
         cr = outside[2];
         zc = kInf;
       } else {
-        const float x = std::clamp(sx, 0.f, max_x), y = std::clamp(sy, 0.f, max_y);
-        const int x0 = std::min(static_cast<int>(x), CW - 2 < 0 ? 0 : CW - 2);
-        const int y0 = std::min(static_cast<int>(y), CH - 2 < 0 ? 0 : CH - 2);
-        const int x1 = std::min(x0 + 1, CW - 1), y1 = std::min(y0 + 1, CH - 1);
-        const float ax = x - x0, ay = y - y0;
-        const float* p00 = in.cg_color.ptr<float>(y0) + 3 * x0;
-        const float* p01 = in.cg_color.ptr<float>(y0) + 3 * x1;
-        const float* p10 = in.cg_color.ptr<float>(y1) + 3 * x0;
-        const float* p11 = in.cg_color.ptr<float>(y1) + 3 * x1;
+        const float ax = t.wx * (1.f / 256), ay = t.wy * (1.f / 256);
+        const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
+        const float* p01 = p00 + 3 * dx1;
+        const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
+        const float* p11 = p10 + 3 * dx1;
         const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
         cr = gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]);
         cgc = gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]);
         cb = gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]);
-        const int nx = static_cast<int>(std::lround(x)), ny = static_cast<int>(std::lround(y));
-        zc = in.cg_depth.ptr<float>(ny)[nx];
+        zc = cg_z[t.index + (t.wx >= 128 ? dx1 : 0) + (t.wy >= 128 ? dy1 : 0)];
       }
 
       const float alpha = std::clamp(al[u], 0.f, 1.f);
@@ -269,6 +284,13 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
         a = alpha * w;
       }
       const std::uint8_t* fp = f + 3 * u;
+      if (a >= 1.f && !debug_layers) {
+        // The plate as shot, byte for byte (decode + encode is the identity on 8-bit codes).
+        o[3 * u + 0] = fp[0];
+        o[3 * u + 1] = fp[1];
+        o[3 * u + 2] = fp[2];
+        continue;
+      }
       const float ob = a * dec[fp[0]] + (1 - a) * cb;
       const float og = a * dec[fp[1]] + (1 - a) * cgc;
       const float orr = a * dec[fp[2]] + (1 - a) * cr;

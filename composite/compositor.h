@@ -17,6 +17,10 @@
 // Colour: plates and outputs are 8-bit sRGB (B, G, R), CG colour linear R, G, B (EXR order).
 // Depth: metric z along the camera axis, +inf = nothing; pixel (0,0) is the centre of the
 // top-left pixel (docs/conventions.md).
+#include <cstdint>
+#include <string>
+#include <vector>
+
 #include <opencv2/core.hpp>
 
 #include "core/camera.h"
@@ -109,6 +113,13 @@ class Compositor {
   CompositeOptions options_;
   DistortMapResult map_;
   int outside_cg_ = 0;
+  // The map as the pass reads it, one entry per lens pixel: index of the top-left of the 2 x 2
+  // CG pixels it blends (-1 = outside the CG) and the blend weights in 1/256 (0.004 px steps).
+  struct Tap {
+    std::int32_t index = -1;
+    std::uint8_t wx = 0, wy = 0;
+  };
+  std::vector<Tap> taps_;
 };
 
 // 8-bit previews for people (the EXR layers hold the numbers): depth as turbo colour over

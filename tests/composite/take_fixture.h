@@ -45,11 +45,22 @@ inline synth::SynthOptions takeOptions() {
   return o;
 }
 
-// Rendered once per test process.
+// The CTest fixture composite.take renders it once per CTest run (`previz synth` with the same
+// options) into PREVIZ_COMPOSITE_TAKE; a test process run on its own, without it, renders its
+// own copy once.
 inline const fs::path& studioTake() {
   static const fs::path dir = [] {
+    const fs::path shared(PREVIZ_COMPOSITE_TAKE);
+    const synth::SynthOptions o = takeOptions();
+    if (fs::exists(shared / "take.json")) {
+      const nlohmann::json t = readJsonFile(shared / "take.json");
+      const nlohmann::json& opt = t.at("options");
+      if (t.value("frames", 0) == o.frames && t.value("fps", 0.0) == o.fps && opt.value("witness_width", 0) == o.witness_width &&
+          opt.value("main_width", 0) == o.main_width && opt.value("seed", 0) == static_cast<int>(o.seed))
+        return shared;
+    }
     const fs::path d = previz::test::scratchDir("composite", "studio");
-    synth::synthesizeTake(takeOptions(), d);
+    synth::synthesizeTake(o, d);
     return d;
   }();
   return dir;
@@ -108,23 +119,26 @@ inline cv::Mat trueCgDepth(const RigCamera& main_true, double time_s) {
 
 // Runs the frame loop on every frame of the take with 'rig' (+ main poses as given) and measures
 // each frame against truth. 'label' heads the printed table.
-inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_path, bool relative_poses,
+// tracked_poses: "" = the take's true world poses of main (truth/main_poses.jsonl); else the
+// camera tracker's T_main0_main lines (app/frame_loop.h TakeInputOptions).
+inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_path, const fs::path& tracked_poses,
                                const char* label) {
   carving::TakeSource src;
   src.take_dir = take_dir;
   src.rig_path = rig_path;
-  src.main_poses = take_dir / "truth" / "main_poses.jsonl";
+  if (tracked_poses.empty()) src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   const carving::Take take(src);
   const Camera cg = readCgCamera(take_dir / "cg" / "camera.json");
   app::FrameLoopOptions lo;
   lo.debug_layers = true;
   app::FrameLoop loop(take.rig(), cg, lo);
   app::TakeInputOptions io;
-  io.relative_main_poses = relative_poses;
+  io.tracked_main_poses = tracked_poses;
   const app::TakeReader reader(take, loop, io);
 
   // Truth side of the main camera: the true rig and the true poses.
   carving::TakeSource truth_src = src;
+  truth_src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   truth_src.rig_path = take_dir / "truth" / "rig.json";
   const carving::Take truth_take(truth_src);
 

@@ -135,6 +135,9 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
 
 struct RunArgs {
   std::string take, out, frames, video;
+  std::vector<std::string> live;  // NAME=SOURCE
+  bool no_pace = false;
+  double live_fps = 0;
   LoopArgs loop;
   bool meshes = false, layers = false, exr = false, json = false, quiet = false;
 };
@@ -152,7 +155,20 @@ int runRun(const RunArgs& a) {
   std::vector<int> frames;
   for (int f : l.take->frames())
     if (range.contains(f)) frames.push_back(f);
-  if (frames.empty()) throw Error("no frame of the take is in the range", flag("--frames"));
+  if (frames.empty() && a.live.empty()) throw Error("no frame of the take is in the range", flag("--frames"));
+  std::unique_ptr<LiveReader> live;
+  if (!a.live.empty()) {
+    LiveOptions lo;
+    for (const std::string& item : a.live) {
+      const size_t eq = item.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
+        throw Error("expected NAME=SOURCE (device index, file or GStreamer pipeline), got '" + item + "'", flag("--live"));
+      lo.sources[item.substr(0, eq)] = item.substr(eq + 1);
+    }
+    lo.pace = !a.no_pace;
+    lo.fps = a.live_fps;
+    live = std::make_unique<LiveReader>(*l.loop, *l.reader, lo);
+  }
 
   const fs::path out(a.out);
   composite::OutputOptions oo;
@@ -164,7 +180,8 @@ int runRun(const RunArgs& a) {
   composite::CompositeWriter writer(oo);
   const std::string main = l.loop->mainCamera();
   if (!a.quiet) {
-    std::cerr << "run: " << frames.size() << " frames, " << l.loop->carveCameras().size()
+    std::cerr << "run: " << (live ? std::string("live") : std::to_string(frames.size()) + " frames") << ", "
+              << l.loop->carveCameras().size()
               << " witnesses carve, main '" << main << "'" << (l.lens_note.empty() ? "" : ", " + l.lens_note)
               << "; stages:";
     for (const std::string& s : l.loop->stages()) std::cerr << " " << s;
@@ -177,12 +194,21 @@ int runRun(const RunArgs& a) {
   double total_ms = 0;
   nlohmann::json dropped = nlohmann::json::array();
   const Clock::time_point start = Clock::now();
-  ProgressLine progress("run", static_cast<int>(frames.size()), true);
   int done = 0;
-  for (int f : frames) {
+  std::vector<int> ran;
+  const size_t live_limit = range.end >= 0 ? static_cast<size_t>(range.end - range.first) : 0;
+  for (size_t next = 0;; ++next) {
     const Clock::time_point t0 = Clock::now();
     FrameState s;
-    l.reader->read(f, s);
+    if (live) {
+      if (live_limit > 0 && ran.size() >= live_limit) break;
+      if (!live->next(s)) break;
+    } else {
+      if (next >= frames.size()) break;
+      l.reader->read(frames[next], s);
+    }
+    const int f = s.frame;
+    ran.push_back(f);
     const double read_ms = msSince(t0);
     std::vector<StageTime> times = l.loop->run(s);
     const Clock::time_point w0 = Clock::now();
@@ -223,19 +249,25 @@ int runRun(const RunArgs& a) {
     ++done;
     if (!a.quiet) {
       const double fps = 1000.0 * done / std::max(1e-9, msSince(start));
-      std::fprintf(stderr, "[run] frame %d (%d/%zu) |", f, done, frames.size());
+      std::fprintf(stderr, "[run] frame %d (%d/%s) |", f, done, live ? "live" : std::to_string(frames.size()).c_str());
       for (const StageTime& t : times) std::fprintf(stderr, " %s %.1f", t.stage.c_str(), t.ms);
-      std::fprintf(stderr, " ms | %.2f fps\n", fps);
+      std::fprintf(stderr, " ms | %.2f fps%s\n", fps,
+                   live ? (" | dropped " + std::to_string(live->dropped())).c_str() : "");
     }
-    progress.update(done);
   }
+  if (ran.empty()) throw Error("no frame was run (the live sources gave none)", flag("--live"));
+  frames = ran;
   writer.close();
   writeFileAtomic(out / "poses.jsonl", poses);
   writeFileAtomic(out / "run.jsonl", report);
   nlohmann::json mean = nlohmann::json::object();
   for (const std::string& s : stage_order) mean[s] = stage_sum[s] / frames.size();
   const double fps = total_ms > 0 ? 1000.0 * frames.size() / total_ms : 0.0;
-  std::cerr << "run: " << frames.size() << " frames, " << fps << " fps (read and write included) -> " << out << "\n";
+  std::cerr << "run: " << frames.size() << " frames, " << fps << " fps (read and write included)";
+  if (live)
+    std::cerr << ", live at " << live->fps() << " fps: " << live->delivered() << " frames processed, "
+              << live->dropped() << " dropped (late)";
+  std::cerr << " -> " << out << "\n";
   if (a.json) {
     std::cout << nlohmann::json{{"command", "run"},
                                 {"out", out.string()},
@@ -243,7 +275,11 @@ int runRun(const RunArgs& a) {
                                 {"stages", stage_order},
                                 {"mean_ms", mean},
                                 {"fps", fps},
-                                {"dropped", dropped}}
+                                {"dropped", dropped},
+                                {"live", live ? nlohmann::json{{"fps", live->fps()},
+                                                               {"delivered", live->delivered()},
+                                                               {"dropped_frames", live->dropped()}}
+                                              : nlohmann::json()}}
                      .dump()
               << "\n";
   }
@@ -298,18 +334,21 @@ int runBench(const BenchArgs& a) {
   }
   // Warm-up: the keyers' screen models and the depth ray table are built on the first frame.
   { FrameState s = inputs[0]; l.loop->run(s); }
-  std::map<std::string, std::vector<double>> ms;
-  std::vector<double> total;
+  std::map<std::string, std::vector<double>> ms, cpu;
+  std::vector<double> total, total_cpu;
   std::vector<std::string> order = l.loop->stages();
   for (int r = 0; r < a.repeats; ++r) {
     for (const FrameState& in : inputs) {
       FrameState s = in;
-      double sum = 0;
+      double sum = 0, sum_cpu = 0;
       for (const StageTime& t : l.loop->run(s)) {
         ms[t.stage].push_back(t.ms);
+        cpu[t.stage].push_back(t.cpu_ms);
         sum += t.ms;
+        sum_cpu += t.cpu_ms;
       }
       total.push_back(sum);
+      total_cpu.push_back(sum_cpu);
     }
   }
   const double budget_ms = 20.0;
@@ -327,10 +366,10 @@ int runBench(const BenchArgs& a) {
       largest_ms = m;
       largest = s;
     }
-    nlohmann::json j = {{"stage", s}, {"size", size}, {"ms", m}};
+    nlohmann::json j = {{"stage", s}, {"size", size}, {"ms", m}, {"cpu_ms", median(cpu[s])}};
     if (stage_budget.count(s)) j["budget_ms"] = stage_budget.at(s);
     stages.push_back(j);
-    std::fprintf(stderr, "  %-10s %8.2f ms%s\n", s.c_str(), m,
+    std::fprintf(stderr, "  %-10s %8.2f ms wall, %8.2f ms CPU (all threads)%s\n", s.c_str(), m, median(cpu[s]),
                  stage_budget.count(s) ? (" (budget " + std::to_string(int(stage_budget.at(s))) + " ms)").c_str() : "");
   }
   const double t = median(total);
@@ -339,7 +378,10 @@ int runBench(const BenchArgs& a) {
                "stage: %s %.2f ms; reading the PNGs (not in the loop): %.1f ms a frame\n",
                size.c_str(), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(), t, 1000.0 / t, budget_ms,
                t - budget_ms, largest.c_str(), largest_ms, median(read_ms));
-  nlohmann::json j = {{"stage", "run"},      {"size", size},   {"ms", t},
+  std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
+               "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
+               median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));
+  nlohmann::json j = {{"stage", "run"},      {"size", size},   {"ms", t}, {"cpu_ms", median(total_cpu)},
                       {"fps", 1000.0 / t},   {"target_ms", budget_ms}, {"largest_stage", largest},
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
@@ -359,6 +401,11 @@ Runner addRunCommand(CLI::App& app) {
   cmd->add_option("--out", a->out, "Output folder")->required();
   addLoopOptions(cmd, a->loop, false);
   cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
+  cmd->add_option("--live", a->live,
+                  "Read cameras live through OpenCV VideoCapture: NAME=SOURCE per camera (device index, "
+                  "video file or GStreamer pipeline); late frames are dropped and counted (repeatable)");
+  cmd->add_flag("--no-pace", a->no_pace, "Live: process every frame (files), never drop");
+  cmd->add_option("--live-fps", a->live_fps, "Live: camera rate for pacing (default: the main source's)");
   cmd->add_flag("--meshes", a->meshes, "Also write the hull mesh of every frame (mesh/%06d.ply)");
   cmd->add_flag("--layers", a->layers, "Also write the compositor's debug layers");
   cmd->add_flag("--exr", a->exr, "Also write linear EXR composites");

@@ -2,10 +2,14 @@
 #include "app/frame_loop.h"
 
 #include <omp.h>
+#include <time.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <sstream>
+
+#include <opencv2/videoio.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
@@ -173,16 +177,26 @@ void FrameLoop::insertStage(const std::string& after, const std::string& name, S
   st.insert(it + 1, {name, std::move(fn)});
 }
 
+namespace {
+double processCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+}  // namespace
+
 std::vector<StageTime> FrameLoop::run(FrameState& state) {
   std::vector<StageTime> times;
   for (auto& [name, fn] : impl_->stages) {
     const Clock::time_point start = Clock::now();
+    const double cpu0 = processCpuMs();
     try {
       fn(state);
     } catch (const std::exception& e) {
       throw frameError(name, state.frame, e);
     }
-    times.push_back({name, std::chrono::duration<double, std::milli>(Clock::now() - start).count()});
+    times.push_back({name, std::chrono::duration<double, std::milli>(Clock::now() - start).count(),
+                     processCpuMs() - cpu0});
   }
   return times;
 }
@@ -271,9 +285,77 @@ void TakeReader::read(int frame, FrameState& s) const {
     throw Error("main plate unusable: " + (errors[n].empty() ? frames[n].dropped : errors[n]), c);
   }
   s.main_plate = frames[n].image;
+  readCg(frame, s);
+}
+
+void TakeReader::readCg(int frame, FrameState& s) const {
+  s.frame = frame;
   s.main = mainAt(frame);
   s.cg = composite::readCgFrame(options_.cg_dir.empty() ? take_.source().take_dir / "cg" : options_.cg_dir, frame,
                                 cv::Size(cg_.width, cg_.height));
+}
+
+struct LiveReader::Source {
+  std::string camera, uri;
+  cv::VideoCapture capture;
+};
+
+LiveReader::LiveReader(const FrameLoop& loop, const TakeReader& take, const LiveOptions& options)
+    : take_(take), options_(options) {
+  std::vector<std::string> names = loop.carveCameras();
+  names.push_back(loop.mainCamera());
+  for (const std::string& name : names) {
+    ErrorContext c;
+    c.camera = name;
+    c.field = "--live";
+    const auto it = options.sources.find(name);
+    if (it == options.sources.end()) throw Error("live: no source for this camera (NAME=SOURCE)", c);
+    auto src = std::make_unique<Source>();
+    src->camera = name;
+    src->uri = it->second;
+    const bool index = !it->second.empty() && it->second.find_first_not_of("0123456789") == std::string::npos;
+    const bool opened = index ? src->capture.open(std::stoi(it->second))
+                              : src->capture.open(it->second, it->second.find('!') != std::string::npos
+                                                                  ? cv::CAP_GSTREAMER : cv::CAP_ANY);
+    if (!opened) {
+      c.file = it->second;
+      throw Error("live: cannot open the source", c);
+    }
+    sources_.push_back(std::move(src));
+  }
+  fps_ = options.fps > 0 ? options.fps : sources_.back()->capture.get(cv::CAP_PROP_FPS);
+  if (!(fps_ > 0) || !std::isfinite(fps_)) fps_ = 24;
+}
+
+LiveReader::~LiveReader() = default;
+
+bool LiveReader::next(FrameState& s) {
+  if (!started_) {
+    start_ = std::chrono::steady_clock::now();
+    started_ = true;
+  }
+  if (options_.pace) {
+    // The frame the cameras are at now; the ones in between are dropped (grabbed, not decoded).
+    const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const int now_frame = static_cast<int>(elapsed_s * fps_);
+    while (next_frame_ < now_frame) {
+      for (auto& src : sources_)
+        if (!src->capture.grab()) return false;
+      ++next_frame_;
+      ++dropped_;
+    }
+  }
+  const int n = static_cast<int>(sources_.size()) - 1;
+  std::vector<cv::Mat> images(n + 1);
+  for (int i = 0; i <= n; ++i)
+    if (!sources_[i]->capture.read(images[i]) || images[i].empty()) return false;
+  s.witness_plates.assign(images.begin(), images.begin() + n);
+  s.dropped.assign(n, "");
+  s.main_plate = images[n];
+  take_.readCg(next_frame_, s);
+  ++next_frame_;
+  ++delivered_;
+  return true;
 }
 
 }  // namespace previz::app

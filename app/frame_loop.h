@@ -11,6 +11,7 @@
 // writing outputs are the caller's (files, VideoCapture); they are timed by the caller.
 // A stage can be inserted after any other (insertStage), e.g. prop tracking after "depth"; a
 // stage reads and writes FrameState.
+#include <chrono>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -63,7 +64,9 @@ struct FrameState {
 
 struct StageTime {
   std::string stage;
-  double ms = 0;
+  double ms = 0;      // wall time
+  double cpu_ms = 0;  // CPU time of the process (every thread) during the stage: on a shared
+                      // machine wall time also measures the other jobs
 };
 
 class FrameLoop {
@@ -119,6 +122,8 @@ class TakeReader {
   // left as they are). A missing or bad witness frame drops that camera (s.dropped); a missing
   // main plate or CG frame throws Error naming the file and the frame.
   void read(int frame, FrameState& s) const;
+  // The CG frame and the main camera of a frame whose plates came from elsewhere (live).
+  void readCg(int frame, FrameState& s) const;
 
  private:
   const carving::Take& take_;
@@ -127,6 +132,40 @@ class TakeReader {
   Camera cg_;
   TakeInputOptions options_;
   std::map<int, Pose> tracked_;
+};
+
+// Live input through OpenCV VideoCapture: one source per camera (a device index "0", a file,
+// or a GStreamer pipeline string), read in lock step; frame k of every source is frame k of the
+// take (CG frame, main pose). With pacing the loop never falls behind: before each frame, every
+// source is advanced to the frame the clock says the cameras are at now (fps), and the frames
+// skipped are counted as dropped. Without pacing (files, tests) every frame is processed.
+struct LiveOptions {
+  std::map<std::string, std::string> sources;  // camera -> source; every carving camera and main
+  bool pace = true;
+  double fps = 0;  // camera rate for pacing; 0 = the main source's CAP_PROP_FPS (else 24)
+};
+
+class LiveReader {
+ public:
+  // Opens every source; throws Error naming the camera and the source when one cannot be
+  // opened or a camera of the loop has no source.
+  LiveReader(const FrameLoop& loop, const TakeReader& take, const LiveOptions& options);
+  ~LiveReader();
+  // The next frame to process into s (plates, CG, main camera); false at the end of a stream.
+  bool next(FrameState& s);
+  int delivered() const { return delivered_; }
+  int dropped() const { return dropped_; }
+  double fps() const { return fps_; }
+
+ private:
+  struct Source;
+  std::vector<std::unique_ptr<Source>> sources_;  // carving cameras, then main
+  const TakeReader& take_;
+  LiveOptions options_;
+  double fps_ = 24;
+  int next_frame_ = 0, delivered_ = 0, dropped_ = 0;
+  std::chrono::steady_clock::time_point start_;
+  bool started_ = false;
 };
 
 }  // namespace previz::app

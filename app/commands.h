@@ -20,5 +20,9 @@ Runner addLensCommand(CLI::App& calib);
 Runner addCarveCommand(CLI::App& app);
 // `previz track` (with verbs `prop` and `camera`); defined only when tracking/ is built.
 Runner addTrackCommand(CLI::App& app);
+Runner addCompositeCommand(CLI::App& app);
+Runner addRunCommand(CLI::App& app);
+// `previz bench run` (the bench command with its verbs).
+Runner addBenchCommand(CLI::App& app);
 
 }  // namespace previz::app

@@ -23,6 +23,9 @@ int main(int argc, char** argv) {
   add("carve", previz::app::addCarveCommand);
   add("rig", previz::app::addRigCommand);
   add("track", previz::app::addTrackCommand);
+  add("composite", previz::app::addCompositeCommand);
+  add("run", previz::app::addRunCommand);
+  add("bench", previz::app::addBenchCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");
 

@@ -60,8 +60,8 @@ else
   fail "real data missing: $par"
 fi
 
-if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ]; then
-  ok "demo writes a contact sheet"
+if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run/composite/000001.png" ]; then
+  ok "demo writes a contact sheet, the composites and the report page"
 else fail "demo"; fi
 
 finish

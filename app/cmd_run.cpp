@@ -1,0 +1,434 @@
+// previz run: the live previz frame over a take — per frame key -> carve -> main-view depth ->
+// composite (app/frame_loop.h), writing composites, depth, the main camera's poses and, on
+// request, meshes, debug layers and a video; a progress line with per-stage ms and fps.
+// previz bench run: the same loop on frames held in memory, ms per stage, as JSON.
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <numeric>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "app/commands.h"
+#include "app/frame_loop.h"
+#include "app/options.h"
+#include "app/progress.h"
+#include "calib/lens_table.h"
+#include "carving/run.h"
+#include "core/error.h"
+#include "core/io.h"
+#include "core/mesh.h"
+#include "core/pose.h"
+#include "datasets/synth.h"
+
+namespace previz::app {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+ErrorContext flag(const std::string& name) {
+  ErrorContext c;
+  c.field = name;
+  return c;
+}
+
+std::string stem(int frame) {
+  char s[32];
+  std::snprintf(s, sizeof(s), "%06d", frame);
+  return s;
+}
+
+// Loop options shared by run and bench run.
+struct LoopArgs {
+  std::string rig, main_poses, lens, cg_dir;
+  double focus = 0, zoom = 0;
+  std::string tracked_main_poses;
+  double voxel_m = 0.005;
+  int k = 0;
+  double band_m = 0.04;
+  double cg_gain = 1.0;
+  int threads = 0;
+};
+
+void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
+  auto* rig = cmd->add_option("--rig", a.rig, "rig.json (witnesses + main); default: the take's truth/rig.json");
+  if (rig_required) rig->required();
+  cmd->add_option("--main-poses", a.main_poses,
+                  "JSON lines {frame, T_world_cam} of the moving main camera (default: the take's "
+                  "truth/main_poses.jsonl when it exists)");
+  cmd->add_option("--tracked-main-poses", a.tracked_main_poses,
+                  "Camera tracker's JSON lines {frame, T_main0_main}: the main camera's motion from its pose "
+                  "in the rig (where it stood at rig calibration); replaces --main-poses");
+  cmd->add_option("--lens", a.lens, "Lens table (lens/<lens>.json) for the main camera's intrinsics");
+  cmd->add_option("--focus", a.focus, "Focus encoder value for --lens")->capture_default_str();
+  cmd->add_option("--zoom", a.zoom, "Zoom encoder value for --lens")->capture_default_str();
+  cmd->add_option("--cg", a.cg_dir, "CG folder with color/, depth/, camera.json (default: TAKE/cg)");
+  cmd->add_option("--voxel", a.voxel_m, "Finest carving cell, metres")->capture_default_str();
+  cmd->add_option("--k", a.k, "A cell survives outside the silhouette of at most k cameras")->capture_default_str();
+  cmd->add_option("--depth-band", a.band_m, "Soft front/behind transition, metres")->capture_default_str();
+  cmd->add_option("--cg-gain", a.cg_gain, "Linear gain on the CG colour (match the plate's exposure)")
+      ->capture_default_str();
+  cmd->add_option("--threads", a.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+}
+
+struct Loaded {
+  std::unique_ptr<carving::Take> take;
+  std::unique_ptr<FrameLoop> loop;
+  std::unique_ptr<TakeReader> reader;
+  std::string lens_note;
+};
+
+Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
+  Loaded l;
+  carving::TakeSource src;
+  src.take_dir = take_dir;
+  src.rig_path = a.rig.empty() ? take_dir / "truth" / "rig.json" : fs::path(a.rig);
+  if (!a.main_poses.empty()) src.main_poses = a.main_poses;
+  else if (a.tracked_main_poses.empty() && fs::exists(take_dir / "truth" / "main_poses.jsonl"))
+    src.main_poses = take_dir / "truth" / "main_poses.jsonl";
+  l.take = std::make_unique<carving::Take>(src);
+  const fs::path cg_dir = a.cg_dir.empty() ? take_dir / "cg" : fs::path(a.cg_dir);
+  const Camera cg = composite::readCgCamera(cg_dir / "camera.json");
+
+  FrameLoopOptions o;
+  o.hull.voxel_m = a.voxel_m;
+  o.hull.k = a.k;
+  o.composite.depth_band_m = a.band_m;
+  o.composite.cg_gain = a.cg_gain;
+  o.threads = a.threads;
+  o.debug_layers = debug_layers;
+  Rig rig = l.take->rig();
+  TakeInputOptions io;
+  io.cg_dir = cg_dir;
+  io.tracked_main_poses = a.tracked_main_poses;
+  if (!a.lens.empty()) {
+    const calib::LensTable table = calib::readLensTable(a.lens);
+    const calib::LensTableEntry e = table.at(a.focus, a.zoom);
+    std::string main_name;
+    for (const RigCamera& rc : rig.cameras)
+      if (rc.role == "main") main_name = rc.camera.name;
+    if (main_name.empty()) throw Error("the rig has no main camera for --lens", flag("--lens"));
+    RigCamera& main = rig.at(main_name);
+    Camera lens = e.camera;
+    if (lens.width != main.camera.width || lens.height != main.camera.height)
+      lens = lens.scaled(double(main.camera.width) / lens.width, double(main.camera.height) / lens.height);
+    lens.width = main.camera.width;
+    lens.height = main.camera.height;
+    lens.name = main_name;
+    main.camera = lens;
+    io.main_lens = lens;
+    l.lens_note = "lens " + table.lens_name + " at focus " + std::to_string(a.focus) + ", zoom " +
+                  std::to_string(a.zoom) + (e.clamped ? " (clamped to the table)" : "");
+  }
+  l.loop = std::make_unique<FrameLoop>(rig, cg, o);
+  l.reader = std::make_unique<TakeReader>(*l.take, *l.loop, io);
+  return l;
+}
+
+struct RunArgs {
+  std::string take, out, frames, video;
+  std::vector<std::string> live;  // NAME=SOURCE
+  bool no_pace = false;
+  double live_fps = 0;
+  LoopArgs loop;
+  bool meshes = false, layers = false, exr = false, json = false, quiet = false;
+};
+
+nlohmann::json stageJson(const std::vector<StageTime>& times) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const StageTime& t : times) j[t.stage] = t.ms;
+  return j;
+}
+
+int runRun(const RunArgs& a) {
+  if (a.out.empty()) throw Error("an output folder is required", flag("--out"));
+  Loaded l = load(a.take, a.loop, a.layers || a.exr);
+  const carving::FrameRange range = a.frames.empty() ? carving::FrameRange{} : carving::parseFrameRange(a.frames);
+  std::vector<int> frames;
+  for (int f : l.take->frames())
+    if (range.contains(f)) frames.push_back(f);
+  if (frames.empty() && a.live.empty()) throw Error("no frame of the take is in the range", flag("--frames"));
+  std::unique_ptr<LiveReader> live;
+  if (!a.live.empty()) {
+    LiveOptions lo;
+    for (const std::string& item : a.live) {
+      const size_t eq = item.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
+        throw Error("expected NAME=SOURCE (device index, file or GStreamer pipeline), got '" + item + "'", flag("--live"));
+      lo.sources[item.substr(0, eq)] = item.substr(eq + 1);
+    }
+    lo.pace = !a.no_pace;
+    lo.fps = a.live_fps;
+    live = std::make_unique<LiveReader>(*l.loop, *l.reader, lo);
+  }
+
+  const fs::path out(a.out);
+  composite::OutputOptions oo;
+  oo.out = out;
+  oo.exr = a.exr;
+  oo.layers = a.layers;
+  oo.video = a.video;
+  if (!a.video.empty() && fs::path(a.video).extension() == ".avi") oo.fourcc = "MJPG";
+  composite::CompositeWriter writer(oo);
+  const std::string main = l.loop->mainCamera();
+  if (!a.quiet) {
+    std::cerr << "run: " << (live ? std::string("live") : std::to_string(frames.size()) + " frames") << ", "
+              << l.loop->carveCameras().size()
+              << " witnesses carve, main '" << main << "'" << (l.lens_note.empty() ? "" : ", " + l.lens_note)
+              << "; stages:";
+    for (const std::string& s : l.loop->stages()) std::cerr << " " << s;
+    std::cerr << " -> " << out << "\n";
+  }
+
+  std::string poses, report;
+  std::map<std::string, double> stage_sum;
+  std::vector<std::string> stage_order;
+  double total_ms = 0;
+  nlohmann::json dropped = nlohmann::json::array();
+  const Clock::time_point start = Clock::now();
+  int done = 0;
+  std::vector<int> ran;
+  const size_t live_limit = range.end >= 0 ? static_cast<size_t>(range.end - range.first) : 0;
+  for (size_t next = 0;; ++next) {
+    const Clock::time_point t0 = Clock::now();
+    FrameState s;
+    if (live) {
+      if (live_limit > 0 && ran.size() >= live_limit) break;
+      if (!live->next(s)) break;
+    } else {
+      if (next >= frames.size()) break;
+      l.reader->read(frames[next], s);
+    }
+    const int f = s.frame;
+    ran.push_back(f);
+    const double read_ms = msSince(t0);
+    std::vector<StageTime> times = l.loop->run(s);
+    const Clock::time_point w0 = Clock::now();
+    writer.write(f, s.composite);
+    writeDepthExr(out / "depth" / (stem(f) + ".exr"), s.main_depth,
+                  {{"previz:camera", main}, {"previz:frame", std::to_string(f)},
+                   {"previz:source", "visual hull (previz run)"}});
+    if (a.meshes) writePly(l.loop->carver().mesh(s.hull), out / "mesh" / (stem(f) + ".ply"));
+    const double write_ms = msSince(w0);
+    times.insert(times.begin(), StageTime{"read", read_ms});
+    times.push_back(StageTime{"write", write_ms});
+    double frame_ms = 0;
+    for (const StageTime& t : times) {
+      if (!stage_sum.count(t.stage)) stage_order.push_back(t.stage);
+      stage_sum[t.stage] += t.ms;
+      frame_ms += t.ms;
+    }
+    total_ms += frame_ms;
+    nlohmann::json drops = nlohmann::json::array();
+    for (size_t i = 0; i < s.dropped.size(); ++i) {
+      if (s.dropped[i].empty()) continue;
+      const std::string cam = l.loop->carveCameras()[i];
+      drops.push_back({{"camera", cam}, {"reason", s.dropped[i]}});
+      dropped.push_back({{"camera", cam}, {"frame", f}, {"reason", s.dropped[i]}});
+      std::cerr << "run: frame " << f << ": camera '" << cam << "' dropped: " << s.dropped[i] << "\n";
+    }
+    poses += nlohmann::json{{"frame", f}, {"camera", main}, {"T_world_cam", poseToJson(s.main.T_world_cam)}}.dump() + "\n";
+    const composite::CompositeStats& cs = s.composite.stats;
+    report += nlohmann::json{{"frame", f},
+                             {"ms", stageJson(times)},
+                             {"total_ms", frame_ms},
+                             {"cameras_dropped", drops},
+                             {"hull", {{"surface_cells", s.hull.stats.surface_cells}, {"inside_cells", s.hull.stats.inside_cells}}},
+                             {"composite", {{"actor_px", cs.actor_px}, {"actor_front_px", cs.actor_front_px},
+                                            {"cg_front_px", cs.cg_front_px}, {"edge_filled_px", cs.edge_filled_px},
+                                            {"fallback_px", cs.fallback_px}}}}
+                  .dump() + "\n";
+    ++done;
+    if (!a.quiet) {
+      const double fps = 1000.0 * done / std::max(1e-9, msSince(start));
+      std::fprintf(stderr, "[run] frame %d (%d/%s) |", f, done, live ? "live" : std::to_string(frames.size()).c_str());
+      for (const StageTime& t : times) std::fprintf(stderr, " %s %.1f", t.stage.c_str(), t.ms);
+      std::fprintf(stderr, " ms | %.2f fps%s\n", fps,
+                   live ? (" | dropped " + std::to_string(live->dropped())).c_str() : "");
+    }
+  }
+  if (ran.empty()) throw Error("no frame was run (the live sources gave none)", flag("--live"));
+  frames = ran;
+  writer.close();
+  writeFileAtomic(out / "poses.jsonl", poses);
+  writeFileAtomic(out / "run.jsonl", report);
+  nlohmann::json mean = nlohmann::json::object();
+  for (const std::string& s : stage_order) mean[s] = stage_sum[s] / frames.size();
+  const double fps = total_ms > 0 ? 1000.0 * frames.size() / total_ms : 0.0;
+  std::cerr << "run: " << frames.size() << " frames, " << fps << " fps (read and write included)";
+  if (live)
+    std::cerr << ", live at " << live->fps() << " fps: " << live->delivered() << " frames processed, "
+              << live->dropped() << " dropped (late)";
+  std::cerr << " -> " << out << "\n";
+  if (a.json) {
+    std::cout << nlohmann::json{{"command", "run"},
+                                {"out", out.string()},
+                                {"frames", frames},
+                                {"stages", stage_order},
+                                {"mean_ms", mean},
+                                {"fps", fps},
+                                {"dropped", dropped},
+                                {"live", live ? nlohmann::json{{"fps", live->fps()},
+                                                               {"delivered", live->delivered()},
+                                                               {"dropped_frames", live->dropped()}}
+                                              : nlohmann::json()}}
+                     .dump()
+              << "\n";
+  }
+  return 0;
+}
+
+// ---- previz bench run --------------------------------------------------------------------
+
+struct BenchArgs {
+  std::string take, out = "out/bench_run";
+  int frames = 3;
+  int repeats = 5;
+  LoopArgs loop;
+  bool json = false;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+int runBench(const BenchArgs& a) {
+  fs::path take_dir = a.take;
+  if (take_dir.empty()) {
+    // The default studio: 8 witnesses 1280x720 + main 1920x1080, rendered once and kept.
+    take_dir = fs::path(a.out) / "take";
+    synth::SynthOptions so;
+    so.frames = a.frames;
+    so.fps = 0.5;  // frames 2 s apart over the choreography (behind the pillar at 2 s)
+    so.write_meshes = false;
+    bool have = false;
+    if (fs::exists(take_dir / "take.json")) {
+      const nlohmann::json t = readJsonFile(take_dir / "take.json");
+      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps;
+    }
+    if (!have) {
+      std::cerr << "bench run: rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080) into "
+                << take_dir << " (once)\n";
+      synth::synthesizeTake(so, take_dir);
+    }
+  }
+  Loaded l = load(take_dir, a.loop, false);
+  std::vector<int> frames = l.take->frames();
+  if (static_cast<int>(frames.size()) > a.frames) frames.resize(a.frames);
+  // Inputs decoded once (the live loop gets frames from capture, not PNG files).
+  std::vector<FrameState> inputs(frames.size());
+  std::vector<double> read_ms;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const Clock::time_point t0 = Clock::now();
+    l.reader->read(frames[i], inputs[i]);
+    read_ms.push_back(msSince(t0));
+  }
+  // Warm-up: the keyers' screen models and the depth ray table are built on the first frame.
+  { FrameState s = inputs[0]; l.loop->run(s); }
+  std::map<std::string, std::vector<double>> ms, cpu;
+  std::vector<double> total, total_cpu;
+  std::vector<std::string> order = l.loop->stages();
+  for (int r = 0; r < a.repeats; ++r) {
+    for (const FrameState& in : inputs) {
+      FrameState s = in;
+      double sum = 0, sum_cpu = 0;
+      for (const StageTime& t : l.loop->run(s)) {
+        ms[t.stage].push_back(t.ms);
+        cpu[t.stage].push_back(t.cpu_ms);
+        sum += t.ms;
+        sum_cpu += t.cpu_ms;
+      }
+      total.push_back(sum);
+      total_cpu.push_back(sum_cpu);
+    }
+  }
+  const double budget_ms = 20.0;
+  const std::map<std::string, double> stage_budget = {{"key", 5}, {"carve", 5}, {"depth", 5}, {"composite", 2}};
+  nlohmann::json stages = nlohmann::json::array();
+  std::string largest;
+  double largest_ms = -1;
+  const Camera& main = l.take->rig().at(l.loop->mainCamera()).camera;
+  const Camera& w0 = l.take->rig().at(l.loop->carveCameras().front()).camera;
+  const std::string size = std::to_string(l.loop->carveCameras().size()) + "x" + std::to_string(w0.width) + "x" +
+                           std::to_string(w0.height) + "+" + std::to_string(main.width) + "x" + std::to_string(main.height);
+  for (const std::string& s : order) {
+    const double m = median(ms[s]);
+    if (m > largest_ms) {
+      largest_ms = m;
+      largest = s;
+    }
+    nlohmann::json j = {{"stage", s}, {"size", size}, {"ms", m}, {"cpu_ms", median(cpu[s])}};
+    if (stage_budget.count(s)) j["budget_ms"] = stage_budget.at(s);
+    stages.push_back(j);
+    std::fprintf(stderr, "  %-10s %8.2f ms wall, %8.2f ms CPU (all threads)%s\n", s.c_str(), m, median(cpu[s]),
+                 stage_budget.count(s) ? (" (budget " + std::to_string(int(stage_budget.at(s))) + " ms)").c_str() : "");
+  }
+  const double t = median(total);
+  std::fprintf(stderr,
+               "bench run: %s, %d threads: %.2f ms a frame (%.1f fps) against the %.0f ms target (%+.1f ms); largest "
+               "stage: %s %.2f ms; reading the PNGs (not in the loop): %.1f ms a frame\n",
+               size.c_str(), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(), t, 1000.0 / t, budget_ms,
+               t - budget_ms, largest.c_str(), largest_ms, median(read_ms));
+  std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
+               "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
+               median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));
+  nlohmann::json j = {{"stage", "run"},      {"size", size},   {"ms", t}, {"cpu_ms", median(total_cpu)},
+                      {"fps", 1000.0 / t},   {"target_ms", budget_ms}, {"largest_stage", largest},
+                      {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
+                      {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
+                      {"read_png_ms", median(read_ms)}, {"take", take_dir.string()}};
+  std::cout << j.dump() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+Runner addRunCommand(CLI::App& app) {
+  auto a = std::make_shared<RunArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "run", "The live previz frame over a take: key -> carve -> main-view depth -> composite "
+             "(docs/formats.md, \"Run output\")");
+  cmd->add_option("--take", a->take, "Take folder (cams/<cam>/%06d.png, cg/)")->required();
+  cmd->add_option("--out", a->out, "Output folder")->required();
+  addLoopOptions(cmd, a->loop, false);
+  cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
+  cmd->add_option("--live", a->live,
+                  "Read cameras live through OpenCV VideoCapture: NAME=SOURCE per camera (device index, "
+                  "video file or GStreamer pipeline); late frames are dropped and counted (repeatable)");
+  cmd->add_flag("--no-pace", a->no_pace, "Live: process every frame (files), never drop");
+  cmd->add_option("--live-fps", a->live_fps, "Live: camera rate for pacing (default: the main source's)");
+  cmd->add_flag("--meshes", a->meshes, "Also write the hull mesh of every frame (mesh/%06d.ply)");
+  cmd->add_flag("--layers", a->layers, "Also write the compositor's debug layers");
+  cmd->add_flag("--exr", a->exr, "Also write linear EXR composites");
+  cmd->add_option("--video", a->video, "Also write the composites as a video OUT/NAME (.mp4, or .avi = MJPG)");
+  cmd->add_flag("--json", a->json, "Print a JSON summary on stdout");
+  cmd->add_flag("--quiet", a->quiet, "No per-frame line");
+  return [a]() { return runRun(*a); };
+}
+
+Runner addBenchCommand(CLI::App& app) {
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks of the whole system (per-stage ones: bench/)");
+  bench->require_subcommand(1);
+  auto a = std::make_shared<BenchArgs>();
+  CLI::App* cmd = bench->add_subcommand(
+      "run", "The whole frame loop on frames in memory (default studio: 8 x 1280x720 + 1920x1080): ms per "
+             "stage, total, fps, as JSON on stdout");
+  cmd->add_option("--take", a->take, "Take to run on (default: render the default studio into OUT/take once)");
+  cmd->add_option("--out", a->out, "Where the default take is kept")->capture_default_str();
+  cmd->add_option("--frames", a->frames, "Frames measured")->capture_default_str();
+  cmd->add_option("--repeats", a->repeats, "Runs over the frames (medians reported)")->capture_default_str();
+  addLoopOptions(cmd, a->loop, false);
+  cmd->add_flag("--json", a->json, "JSON on stdout (always written; kept for uniformity)");
+  return [a]() { return runBench(*a); };
+}
+
+}  // namespace previz::app

@@ -1,0 +1,361 @@
+// The live frame's stages (see frame_loop.h).
+#include "app/frame_loop.h"
+
+#include <omp.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include <opencv2/videoio.hpp>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "core/pose.h"
+
+namespace previz::app {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+ErrorContext fieldContext(const std::string& field) {
+  ErrorContext c;
+  c.field = field;
+  return c;
+}
+
+Error frameError(const std::string& stage, int frame, const std::exception& e) {
+  ErrorContext c;
+  if (const auto* pe = dynamic_cast<const Error*>(&e)) c = pe->context();
+  c.frame = frame;
+  const std::string what = dynamic_cast<const Error*>(&e) ? static_cast<const Error&>(e).message() : e.what();
+  return Error(stage + " failed: " + what, c);
+}
+
+}  // namespace
+
+void FrameLoopOptions::validate() const {
+  hull.validate();
+  keyer.validate();
+  composite.validate();
+  if (threads < 0) throw Error("run: threads must be >= 0", fieldContext("threads"));
+}
+
+struct FrameLoop::Impl {
+  FrameLoopOptions options;
+  std::vector<std::string> carve_names;
+  std::string main_name;
+  std::vector<carving::Keyer> keyers;  // carving cameras, then main
+  std::unique_ptr<carving::Carver> carver;
+  std::unique_ptr<composite::Compositor> compositor;
+  std::vector<std::pair<std::string, StageFn>> stages;
+
+  int threads() const { return options.threads > 0 ? options.threads : omp_get_max_threads(); }
+
+  void key(FrameState& s) {
+    const int n = static_cast<int>(carve_names.size());
+    s.silhouettes.assign(n, cv::Mat());
+    if (s.dropped.size() != static_cast<size_t>(n)) s.dropped.assign(n, "");
+    if (s.witness_plates.size() != static_cast<size_t>(n))
+      throw Error("key: expected " + std::to_string(n) + " witness plates (got " +
+                  std::to_string(s.witness_plates.size()) + ")");
+    std::vector<std::string> errors(n + 1);
+    // One item per camera (main last, the largest: dynamic scheduling). No exception leaves
+    // the region (STYLE.md rule 11).
+#pragma omp parallel for schedule(dynamic) num_threads(threads())
+    for (int i = 0; i <= n; ++i) {
+      try {
+        if (i < n) {
+          if (!s.dropped[i].empty()) continue;
+          if (s.witness_plates[i].empty()) {
+            s.dropped[i] = "no frame";
+            continue;
+          }
+          s.silhouettes[i] = keyers[i].key(s.witness_plates[i], carve_names[i]).silhouette;
+        } else {
+          s.main_key = keyers[n].key(s.main_plate, main_name);
+          s.foreground = carving::despill(s.main_plate, s.main_key, keyers[n].screen(), keyers[n].options());
+        }
+      } catch (const std::exception& e) {
+        errors[i] = e.what();
+      }
+    }
+    for (int i = 0; i < n; ++i)
+      if (!errors[i].empty()) s.dropped[i] = "keying failed: " + errors[i];
+    if (!errors[n].empty()) {
+      ErrorContext c;
+      c.camera = main_name;
+      throw Error("keying the main plate failed: " + errors[n], c);
+    }
+  }
+
+  void carve(FrameState& s) {
+    carving::Silhouettes sil;
+    sil.masks = s.silhouettes;
+    sil.dropped = s.dropped;
+    s.hull = carver->carve(sil);
+  }
+
+  void depth(FrameState& s) { s.main_depth = carver->depth(s.hull, s.main, s.main_key.silhouette); }
+
+  void compose(FrameState& s) {
+    compositor->setLens(s.main.camera);
+    composite::CompositeInputs in;
+    in.foreground = s.foreground;
+    in.alpha = s.main_key.alpha;
+    in.actor_depth = s.main_depth;
+    in.cg_color = s.cg.color;
+    in.cg_depth = s.cg.depth;
+    s.composite = compositor->composite(in, options.debug_layers, "frame " + std::to_string(s.frame));
+  }
+};
+
+FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.options = options;
+  m.options.validate();
+  if (!options.main_camera.empty()) {
+    rig.at(options.main_camera);
+    m.main_name = options.main_camera;
+  } else {
+    for (const RigCamera& rc : rig.cameras)
+      if (rc.role == "main") m.main_name = rc.camera.name;
+    if (m.main_name.empty()) throw Error("run: the rig has no camera with role 'main'", fieldContext("main_camera"));
+  }
+  std::vector<RigCamera> carve_cams;
+  if (options.carve_cameras.empty()) {
+    for (const RigCamera& rc : rig.cameras)
+      if (rc.role == "witness" && rc.camera.name != m.main_name) m.carve_names.push_back(rc.camera.name);
+  } else {
+    m.carve_names = options.carve_cameras;
+  }
+  for (const std::string& name : m.carve_names) carve_cams.push_back(rig.at(name));
+  if (carve_cams.size() < 2)
+    throw Error("run: at least 2 carving cameras are needed (got " + std::to_string(carve_cams.size()) + ")",
+                fieldContext("carve_cameras"));
+  carving::KeyerOptions witness_key = options.keyer;
+  witness_key.soft_alpha = false;  // carving needs the silhouette only
+  witness_key.threads = 1;         // cameras are keyed in parallel
+  for (size_t i = 0; i < m.carve_names.size(); ++i) m.keyers.emplace_back(witness_key);
+  carving::KeyerOptions main_key = options.keyer;
+  main_key.soft_alpha = true;
+  main_key.remember_garbage_zone = false;  // the main camera moves
+  main_key.threads = 1;
+  m.keyers.emplace_back(main_key);
+  carving::HullOptions hull = options.hull;
+  hull.threads = options.threads;
+  m.carver = std::make_unique<carving::Carver>(carve_cams, hull);
+  composite::CompositeOptions co = options.composite;
+  co.threads = options.threads;
+  m.compositor = std::make_unique<composite::Compositor>(rig.at(m.main_name).camera, cg, co);
+  m.stages = {{"key", [&m](FrameState& s) { m.key(s); }},
+              {"carve", [&m](FrameState& s) { m.carve(s); }},
+              {"depth", [&m](FrameState& s) { m.depth(s); }},
+              {"composite", [&m](FrameState& s) { m.compose(s); }}};
+}
+
+FrameLoop::~FrameLoop() = default;
+
+const std::vector<std::string>& FrameLoop::carveCameras() const { return impl_->carve_names; }
+const std::string& FrameLoop::mainCamera() const { return impl_->main_name; }
+const carving::Carver& FrameLoop::carver() const { return *impl_->carver; }
+const composite::Compositor& FrameLoop::compositor() const { return *impl_->compositor; }
+
+std::vector<std::string> FrameLoop::stages() const {
+  std::vector<std::string> names;
+  for (const auto& s : impl_->stages) names.push_back(s.first);
+  return names;
+}
+
+void FrameLoop::insertStage(const std::string& after, const std::string& name, StageFn fn) {
+  auto& st = impl_->stages;
+  const auto it = std::find_if(st.begin(), st.end(), [&](const auto& s) { return s.first == after; });
+  if (it == st.end()) throw Error("run: no stage '" + after + "' to insert '" + name + "' after", fieldContext("after"));
+  st.insert(it + 1, {name, std::move(fn)});
+}
+
+namespace {
+double processCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+}  // namespace
+
+std::vector<StageTime> FrameLoop::run(FrameState& state) {
+  std::vector<StageTime> times;
+  for (auto& [name, fn] : impl_->stages) {
+    const Clock::time_point start = Clock::now();
+    const double cpu0 = processCpuMs();
+    try {
+      fn(state);
+    } catch (const std::exception& e) {
+      throw frameError(name, state.frame, e);
+    }
+    times.push_back({name, std::chrono::duration<double, std::milli>(Clock::now() - start).count(),
+                     processCpuMs() - cpu0});
+  }
+  return times;
+}
+
+TakeReader::TakeReader(const carving::Take& take, const FrameLoop& loop, const TakeInputOptions& options)
+    : take_(take), carve_names_(loop.carveCameras()), main_name_(loop.mainCamera()),
+      cg_(loop.compositor().cg()), options_(options) {
+  if (options_.main_lens) {
+    const Camera& plate = take.rig().at(main_name_).camera;
+    if (options_.main_lens->width != plate.width || options_.main_lens->height != plate.height) {
+      ErrorContext c;
+      c.camera = main_name_;
+      c.field = "lens";
+      throw Error("the lens state is for " + std::to_string(options_.main_lens->width) + "x" +
+                      std::to_string(options_.main_lens->height) + " images, the main plate is " +
+                      std::to_string(plate.width) + "x" + std::to_string(plate.height),
+                  c);
+    }
+  }
+  if (!options_.tracked_main_poses.empty()) {
+    const std::string text = readTextFile(options_.tracked_main_poses);
+    std::istringstream in(text);
+    int line_no = 0;
+    for (std::string line; std::getline(in, line);) {
+      ++line_no;
+      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+      ErrorContext c;
+      c.file = options_.tracked_main_poses.string();
+      try {
+        const nlohmann::json j = nlohmann::json::parse(line);
+        tracked_[j.at("frame").get<int>()] = poseFromJson(j.at("T_main0_main"), "T_main0_main");
+      } catch (const std::exception& e) {
+        c.field = "line " + std::to_string(line_no);
+        throw Error(std::string("bad tracked main pose: ") + e.what(), c);
+      }
+    }
+  }
+}
+
+RigCamera TakeReader::mainAt(int frame) const {
+  RigCamera rc = take_.cameraAt(main_name_, frame);
+  if (!options_.tracked_main_poses.empty()) {
+    const auto it = tracked_.find(frame);
+    if (it == tracked_.end()) {
+      ErrorContext c;
+      c.file = options_.tracked_main_poses.string();
+      c.camera = main_name_;
+      c.frame = frame;
+      throw Error("no tracked pose of the main camera for this frame", c);
+    }
+    rc.T_world_cam = take_.rig().at(main_name_).T_world_cam * it->second;
+  }
+  if (options_.main_lens) {
+    const std::string name = rc.camera.name;
+    rc.camera = *options_.main_lens;
+    rc.camera.name = name;
+  }
+  return rc;
+}
+
+void TakeReader::read(int frame, FrameState& s) const {
+  s.frame = frame;
+  const int n = static_cast<int>(carve_names_.size());
+  s.witness_plates.assign(n, cv::Mat());
+  s.dropped.assign(n, "");
+  std::vector<carving::CameraFrame> frames(n + 1);
+  std::vector<std::string> errors(n + 1);
+#pragma omp parallel for schedule(dynamic)
+  for (int i = 0; i <= n; ++i) {
+    try {
+      frames[i] = take_.read(i < n ? carve_names_[i] : main_name_, frame);
+    } catch (const std::exception& e) {
+      errors[i] = e.what();
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!errors[i].empty()) s.dropped[i] = errors[i];
+    else if (!frames[i].ok()) s.dropped[i] = frames[i].dropped;
+    else s.witness_plates[i] = frames[i].image;
+  }
+  if (!errors[n].empty() || !frames[n].ok() || frames[n].image.empty()) {
+    ErrorContext c;
+    c.camera = main_name_;
+    c.frame = frame;
+    c.file = take_.framePath(main_name_, frame).string();
+    throw Error("main plate unusable: " + (errors[n].empty() ? frames[n].dropped : errors[n]), c);
+  }
+  s.main_plate = frames[n].image;
+  readCg(frame, s);
+}
+
+void TakeReader::readCg(int frame, FrameState& s) const {
+  s.frame = frame;
+  s.main = mainAt(frame);
+  s.cg = composite::readCgFrame(options_.cg_dir.empty() ? take_.source().take_dir / "cg" : options_.cg_dir, frame,
+                                cv::Size(cg_.width, cg_.height));
+}
+
+struct LiveReader::Source {
+  std::string camera, uri;
+  cv::VideoCapture capture;
+};
+
+LiveReader::LiveReader(const FrameLoop& loop, const TakeReader& take, const LiveOptions& options)
+    : take_(take), options_(options) {
+  std::vector<std::string> names = loop.carveCameras();
+  names.push_back(loop.mainCamera());
+  for (const std::string& name : names) {
+    ErrorContext c;
+    c.camera = name;
+    c.field = "--live";
+    const auto it = options.sources.find(name);
+    if (it == options.sources.end()) throw Error("live: no source for this camera (NAME=SOURCE)", c);
+    auto src = std::make_unique<Source>();
+    src->camera = name;
+    src->uri = it->second;
+    const bool index = !it->second.empty() && it->second.find_first_not_of("0123456789") == std::string::npos;
+    const bool opened = index ? src->capture.open(std::stoi(it->second))
+                              : src->capture.open(it->second, it->second.find('!') != std::string::npos
+                                                                  ? cv::CAP_GSTREAMER : cv::CAP_ANY);
+    if (!opened) {
+      c.file = it->second;
+      throw Error("live: cannot open the source", c);
+    }
+    sources_.push_back(std::move(src));
+  }
+  fps_ = options.fps > 0 ? options.fps : sources_.back()->capture.get(cv::CAP_PROP_FPS);
+  if (!(fps_ > 0) || !std::isfinite(fps_)) fps_ = 24;
+}
+
+LiveReader::~LiveReader() = default;
+
+bool LiveReader::next(FrameState& s) {
+  if (!started_) {
+    start_ = std::chrono::steady_clock::now();
+    started_ = true;
+  }
+  if (options_.pace) {
+    // The frame the cameras are at now; the ones in between are dropped (grabbed, not decoded).
+    const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const int now_frame = static_cast<int>(elapsed_s * fps_);
+    while (next_frame_ < now_frame) {
+      for (auto& src : sources_)
+        if (!src->capture.grab()) return false;
+      ++next_frame_;
+      ++dropped_;
+    }
+  }
+  const int n = static_cast<int>(sources_.size()) - 1;
+  std::vector<cv::Mat> images(n + 1);
+  for (int i = 0; i <= n; ++i)
+    if (!sources_[i]->capture.read(images[i]) || images[i].empty()) return false;
+  s.witness_plates.assign(images.begin(), images.begin() + n);
+  s.dropped.assign(n, "");
+  s.main_plate = images[n];
+  take_.readCg(next_frame_, s);
+  ++next_frame_;
+  ++delivered_;
+  return true;
+}
+
+}  // namespace previz::app

@@ -1,0 +1,171 @@
+#pragma once
+// The live previz frame behind `previz run` and `previz bench run`: per frame a list of stages,
+// each timed, run in order on one FrameState:
+//   key       every camera keyed (witnesses: silhouette; main: soft alpha + despill), in
+//             parallel over cameras, one Keyer per camera kept across frames
+//   carve     visual hull from the witness silhouettes (carving/hull.h)
+//   depth     the hull's depth for the main camera at this frame's pose, inside its key
+//   composite keyed main plate over the CG frame, depth-aware (composite/compositor.h)
+// One frame is a function of (rig, camera frames, CG frame) plus the keyers' per-camera screen
+// models (ARCHITECTURE.md): the loop holds no other state between frames. Reading inputs and
+// writing outputs are the caller's (files, VideoCapture); they are timed by the caller.
+// A stage can be inserted after any other (insertStage), e.g. prop tracking after "depth"; a
+// stage reads and writes FrameState.
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "carving/hull.h"
+#include "carving/keyer.h"
+#include "carving/take.h"
+#include "composite/compositor.h"
+#include "composite/output.h"
+#include "core/rig.h"
+
+namespace previz::app {
+
+struct FrameLoopOptions {
+  carving::HullOptions hull;
+  carving::KeyerOptions keyer;              // for every camera (soft_alpha set per role)
+  composite::CompositeOptions composite;
+  std::string main_camera;                  // "" = the rig's camera with role "main"
+  std::vector<std::string> carve_cameras;   // empty = every witness
+  bool debug_layers = false;                // fill CompositeResult's layers
+  int threads = 0;                          // OpenMP threads (0 = default)
+  void validate() const;                    // throws Error naming the field
+};
+
+// Everything one frame carries through the stages.
+struct FrameState {
+  int frame = 0;
+  // Inputs (the caller fills them): one plate per carving camera (CV_8UC3; empty = the camera
+  // is dropped for this frame, with its reason in 'dropped'), the main plate, the main camera at
+  // this frame (pose, lens state) and the CG frame.
+  std::vector<cv::Mat> witness_plates;
+  std::vector<std::string> dropped;          // one per carving camera, "" = used
+  cv::Mat main_plate;
+  RigCamera main;
+  composite::CgFrame cg;
+  // Stage results.
+  std::vector<cv::Mat> silhouettes;          // carving cameras
+  carving::KeyResult main_key;
+  cv::Mat foreground;                        // despilled main plate
+  carving::VisualHull hull;
+  cv::Mat main_depth;                        // CV_32FC1, +inf outside the hull / key
+  composite::CompositeResult composite;
+};
+
+struct StageTime {
+  std::string stage;
+  double ms = 0;      // wall time
+  double cpu_ms = 0;  // CPU time of the process (every thread) during the stage: on a shared
+                      // machine wall time also measures the other jobs
+};
+
+class FrameLoop {
+ public:
+  using StageFn = std::function<void(FrameState&)>;
+
+  // cg: the engine's pinhole (cg/camera.json); main: the main camera's lens at the start (its
+  // per-frame state comes with each FrameState; the CG distortion map is rebuilt when it
+  // changes). Throws Error naming the camera or option.
+  FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& options);
+  ~FrameLoop();
+  FrameLoop(const FrameLoop&) = delete;
+  FrameLoop& operator=(const FrameLoop&) = delete;
+
+  const std::vector<std::string>& carveCameras() const;
+  const std::string& mainCamera() const;
+  std::vector<std::string> stages() const;
+  const carving::Carver& carver() const;
+  const composite::Compositor& compositor() const;
+  // Adds a stage after the one named (throws Error naming 'after' when there is none).
+  void insertStage(const std::string& after, const std::string& name, StageFn fn);
+
+  // Runs every stage on the state; returns each stage's wall time in order. Throws Error naming
+  // the frame (and camera) when a stage fails; a dropped witness only leaves the carve.
+  std::vector<StageTime> run(FrameState& state);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Inputs of one frame from a take folder (carving/take.h: plates, rig, main poses) and its CG
+// (composite/output.h readCgFrame).
+struct TakeInputOptions {
+  std::filesystem::path cg_dir;     // <take>/cg by default
+  // The main camera's intrinsics for the current lens state (a lens-table entry, already at the
+  // plate's size); nullopt = the rig's.
+  std::optional<Camera> main_lens;
+  // The camera tracker's poses of the main camera, JSON lines {"frame", "T_main0_main"}: its
+  // motion from where it stood when the rig was calibrated (the tracker is zeroed there). When
+  // given, T_world_main(f) = T_world_main(rig) T_main0_main(f), and every frame read must be
+  // listed. That is how a rig previz calibrated itself, in its own world frame, meets a tracked
+  // camera. Empty: the take's main poses (world poses, carving/take.h) or the rig's.
+  std::filesystem::path tracked_main_poses;
+};
+
+class TakeReader {
+ public:
+  TakeReader(const carving::Take& take, const FrameLoop& loop, const TakeInputOptions& options);
+  // The main camera at a frame: pose (see tracked_main_poses) and lens.
+  RigCamera mainAt(int frame) const;
+  // Reads every plate (in parallel over cameras) and the CG frame into s (stage outputs are
+  // left as they are). A missing or bad witness frame drops that camera (s.dropped); a missing
+  // main plate or CG frame throws Error naming the file and the frame.
+  void read(int frame, FrameState& s) const;
+  // The CG frame and the main camera of a frame whose plates came from elsewhere (live).
+  void readCg(int frame, FrameState& s) const;
+
+ private:
+  const carving::Take& take_;
+  std::vector<std::string> carve_names_;
+  std::string main_name_;
+  Camera cg_;
+  TakeInputOptions options_;
+  std::map<int, Pose> tracked_;
+};
+
+// Live input through OpenCV VideoCapture: one source per camera (a device index "0", a file,
+// or a GStreamer pipeline string), read in lock step; frame k of every source is frame k of the
+// take (CG frame, main pose). With pacing the loop never falls behind: before each frame, every
+// source is advanced to the frame the clock says the cameras are at now (fps), and the frames
+// skipped are counted as dropped. Without pacing (files, tests) every frame is processed.
+struct LiveOptions {
+  std::map<std::string, std::string> sources;  // camera -> source; every carving camera and main
+  bool pace = true;
+  double fps = 0;  // camera rate for pacing; 0 = the main source's CAP_PROP_FPS (else 24)
+};
+
+class LiveReader {
+ public:
+  // Opens every source; throws Error naming the camera and the source when one cannot be
+  // opened or a camera of the loop has no source.
+  LiveReader(const FrameLoop& loop, const TakeReader& take, const LiveOptions& options);
+  ~LiveReader();
+  // The next frame to process into s (plates, CG, main camera); false at the end of a stream.
+  bool next(FrameState& s);
+  int delivered() const { return delivered_; }
+  int dropped() const { return dropped_; }
+  double fps() const { return fps_; }
+
+ private:
+  struct Source;
+  std::vector<std::unique_ptr<Source>> sources_;  // carving cameras, then main
+  const TakeReader& take_;
+  LiveOptions options_;
+  double fps_ = 24;
+  int next_frame_ = 0, delivered_ = 0, dropped_ = 0;
+  std::chrono::steady_clock::time_point start_;
+  bool started_ = false;
+};
+
+}  // namespace previz::app

@@ -1,0 +1,350 @@
+// Depth-aware compositor (see compositor.h).
+#include "composite/compositor.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+
+namespace previz::composite {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+ErrorContext fieldContext(const std::string& field) {
+  ErrorContext c;
+  c.field = field;
+  return c;
+}
+
+int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+// IEC 61966-2-1.
+double srgbDecode(double e) { return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4); }
+double srgbEncode(double l) {
+  l = std::clamp(l, 0.0, 1.0);
+  return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
+}
+
+const std::array<float, 256>& decodeTable() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) t[i] = static_cast<float>(srgbDecode(i / 255.0));
+    return t;
+  }();
+  return table;
+}
+
+// Linear [0, 1] in 65536 steps -> 8-bit sRGB code, rounded as the renderer rounds. The step
+// (1.5e-5 linear) is below a tenth of a code everywhere, darks included.
+constexpr int kEncodeSize = 65536;
+const std::vector<std::uint8_t>& encodeTable() {
+  static const std::vector<std::uint8_t> table = [] {
+    std::vector<std::uint8_t> t(kEncodeSize);
+    for (int i = 0; i < kEncodeSize; ++i)
+      t[i] = static_cast<std::uint8_t>(std::lround(255.0 * srgbEncode(i / double(kEncodeSize - 1))));
+    return t;
+  }();
+  return table;
+}
+
+inline std::uint8_t encode(const std::uint8_t* table, float linear) {
+  const float s = linear * float(kEncodeSize - 1) + 0.5f;
+  const int i = s <= 0.f ? 0 : (s >= float(kEncodeSize - 1) ? kEncodeSize - 1 : static_cast<int>(s));
+  return table[i];
+}
+
+inline float smoothstep01(float t) {
+  t = std::clamp(t, 0.f, 1.f);
+  return t * t * (3.f - 2.f * t);
+}
+
+void checkInput(const cv::Mat& m, int type, cv::Size size, const char* name, const std::string& source) {
+  if (m.empty() || m.type() != type || m.size() != size) {
+    ErrorContext c = fieldContext(name);
+    throw Error(std::string("composite") + (source.empty() ? "" : " (" + source + ")") + ": " + name +
+                    " must be " + cv::typeToString(type) + " of " + std::to_string(size.width) + "x" +
+                    std::to_string(size.height) + " (got " +
+                    (m.empty() ? std::string("an empty image")
+                               : cv::typeToString(m.type()) + " of " + std::to_string(m.cols) + "x" +
+                                     std::to_string(m.rows)) +
+                    ")",
+                c);
+  }
+}
+
+bool sameLens(const Camera& a, const Camera& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx &&
+         a.cy == b.cy && a.skew == b.skew && a.dist.k1 == b.dist.k1 && a.dist.k2 == b.dist.k2 &&
+         a.dist.p1 == b.dist.p1 && a.dist.p2 == b.dist.p2 && a.dist.k3 == b.dist.k3;
+}
+
+}  // namespace
+
+void CompositeOptions::validate() const {
+  if (!(depth_band_m >= 0) || !std::isfinite(depth_band_m))
+    throw Error("composite: depth_band_m must be >= 0 (got " + std::to_string(depth_band_m) + ")",
+                fieldContext("depth_band_m"));
+  if (edge_fill_px < 0 || edge_fill_px > 32)
+    throw Error("composite: edge_fill_px must be in [0, 32] (got " + std::to_string(edge_fill_px) + ")",
+                fieldContext("edge_fill_px"));
+  if (!(cg_gain > 0) || !std::isfinite(cg_gain))
+    throw Error("composite: cg_gain must be > 0 (got " + std::to_string(cg_gain) + ")", fieldContext("cg_gain"));
+  if (threads < 0)
+    throw Error("composite: threads must be >= 0 (got " + std::to_string(threads) + ")", fieldContext("threads"));
+}
+
+Compositor::Compositor(const Camera& lens, const Camera& cg, const CompositeOptions& options)
+    : lens_(lens), cg_(cg), options_(options) {
+  options_.validate();
+  lens_.validate();
+  cg_.validate();
+  if (!cg_.dist.isZero()) {
+    ErrorContext c;
+    c.camera = cg_.name;
+    c.field = "distortion";
+    throw Error("composite: the CG camera must be an ideal pinhole (zero distortion)", c);
+  }
+  build();
+}
+
+bool Compositor::setLens(const Camera& lens) {
+  if (sameLens(lens, lens_)) return false;
+  lens.validate();
+  lens_ = lens;
+  build();
+  return true;
+}
+
+void Compositor::build() {
+  map_ = makeDistortMap(lens_, cg_);
+  int outside = 0;
+  const int CW = cg_.width, CH = cg_.height;
+  taps_.assign(static_cast<size_t>(lens_.width) * lens_.height, Tap{});
+  for (int v = 0; v < map_.map.rows; ++v) {
+    const cv::Vec2f* m = map_.map.ptr<cv::Vec2f>(v);
+    for (int u = 0; u < map_.map.cols; ++u) {
+      const float sx = m[u][0], sy = m[u][1];
+      if (sx == -1.f && sy == -1.f) continue;  // not invertible, counted by the map
+      if (sx < -0.5f || sy < -0.5f || sx > CW - 0.5f || sy > CH - 0.5f) {
+        ++outside;
+        continue;
+      }
+      // Within half a pixel of the border: the border pixel (clamped), then the 2 x 2 block that
+      // holds the point, its origin kept inside the image.
+      const float x = std::clamp(sx, 0.f, CW - 1.f), y = std::clamp(sy, 0.f, CH - 1.f);
+      const int x0 = std::min(static_cast<int>(x), std::max(CW - 2, 0));
+      const int y0 = std::min(static_cast<int>(y), std::max(CH - 2, 0));
+      Tap& t = taps_[static_cast<size_t>(v) * lens_.width + u];
+      t.index = y0 * CW + x0;
+      // Weights in 1/256, at most 255: a point on the far pixel's centre (the last column or
+      // row) is read 1/256 px short of it.
+      t.wx = static_cast<std::uint8_t>(std::min(255, static_cast<int>((x - x0) * 256.f + 0.5f)));
+      t.wy = static_cast<std::uint8_t>(std::min(255, static_cast<int>((y - y0) * 256.f + 0.5f)));
+    }
+  }
+  outside_cg_ = outside;
+}
+
+cv::Mat Compositor::distortCg(const cv::Mat& cg_image, bool nearest, const cv::Scalar& border) const {
+  if (cg_image.empty() || cg_image.cols != cg_.width || cg_image.rows != cg_.height) {
+    ErrorContext c;
+    c.camera = cg_.name;
+    throw Error("composite: a CG image must be " + std::to_string(cg_.width) + "x" +
+                    std::to_string(cg_.height) + " (the CG camera's size)",
+                c);
+  }
+  cv::Mat out;
+  cv::remap(cg_image, out, map_.map, cv::noArray(), nearest ? cv::INTER_NEAREST : cv::INTER_LINEAR,
+            cv::BORDER_CONSTANT, border);
+  return out;
+}
+
+CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_layers,
+                                      const std::string& source) const {
+  const Clock::time_point start = Clock::now();
+  const cv::Size lens_size(lens_.width, lens_.height), cg_size(cg_.width, cg_.height);
+  checkInput(in.foreground, CV_8UC3, lens_size, "foreground", source);
+  checkInput(in.alpha, CV_32FC1, lens_size, "alpha", source);
+  checkInput(in.actor_depth, CV_32FC1, lens_size, "actor_depth", source);
+  checkInput(in.cg_color, CV_32FC3, cg_size, "cg_color", source);
+  checkInput(in.cg_depth, CV_32FC1, cg_size, "cg_depth", source);
+
+  CompositeResult r;
+  const int W = lens_.width, H = lens_.height, CW = cg_.width, CH = cg_.height;
+  r.bgr.create(H, W, CV_8UC3);
+  if (debug_layers) {
+    r.layer_alpha.create(H, W, CV_32FC1);
+    r.layer_actor_depth.create(H, W, CV_32FC1);
+    r.layer_cg_depth.create(H, W, CV_32FC1);
+    r.layer_front.create(H, W, CV_8UC1);
+    r.linear.create(H, W, CV_32FC3);
+  }
+  const std::array<float, 256>& dec = decodeTable();
+  const std::uint8_t* enc = encodeTable().data();
+  const float gain = static_cast<float>(options_.cg_gain);
+  const float band = static_cast<float>(options_.depth_band_m);
+  const int fill = options_.edge_fill_px;
+  const cv::Vec3f outside = options_.outside_rgb;
+  // The CG images as flat arrays (continuous: EXR reads and cv::Mat creates are).
+  const cv::Mat cg_color = in.cg_color.isContinuous() ? in.cg_color : in.cg_color.clone();
+  const cv::Mat cg_depth = in.cg_depth.isContinuous() ? in.cg_depth : in.cg_depth.clone();
+  const float* cg_rgb = cg_color.ptr<float>();
+  const float* cg_z = cg_depth.ptr<float>();
+  const int dx1 = CW > 1 ? 1 : 0, dy1 = CH > 1 ? CW : 0;  // neighbour offsets (pixels)
+
+  long long actor_px = 0, actor_front = 0, cg_front = 0, filled = 0, fallback = 0;
+#pragma omp parallel for schedule(static, 16) num_threads(threadCount(options_.threads)) \
+    reduction(+ : actor_px, actor_front, cg_front, filled, fallback)
+  for (int v = 0; v < H; ++v) {
+    const Tap* tap_row = taps_.data() + static_cast<size_t>(v) * W;
+    const std::uint8_t* f = in.foreground.ptr<std::uint8_t>(v);
+    const float* al = in.alpha.ptr<float>(v);
+    const float* za_row = in.actor_depth.ptr<float>(v);
+    std::uint8_t* o = r.bgr.ptr<std::uint8_t>(v);
+    for (int u = 0; u < W; ++u) {
+      // CG through the lens: bilinear colour, nearest depth (a blend of depths across the
+      // pillar's edge would be a depth that exists nowhere).
+      const Tap t = tap_row[u];
+      float cb, cgc, cr, zc;
+      if (t.index < 0) {
+        cb = outside[0];
+        cgc = outside[1];
+        cr = outside[2];
+        zc = kInf;
+      } else {
+        const float ax = t.wx * (1.f / 256), ay = t.wy * (1.f / 256);
+        const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
+        const float* p01 = p00 + 3 * dx1;
+        const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
+        const float* p11 = p10 + 3 * dx1;
+        const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+        cr = gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]);
+        cgc = gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]);
+        cb = gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]);
+        zc = cg_z[t.index + (t.wx >= 128 ? dx1 : 0) + (t.wy >= 128 ? dy1 : 0)];
+      }
+
+      const float alpha = std::clamp(al[u], 0.f, 1.f);
+      float za = za_row[u];
+      unsigned char code = kFrontNone;
+      float a = 0;
+      if (alpha > 0) {
+        ++actor_px;
+        if (!std::isfinite(za) && fill > 0) {
+          // Nearest known depth in the window (ties: the nearer surface).
+          int best_d2 = std::numeric_limits<int>::max();
+          float best = kInf;
+          for (int dy = -fill; dy <= fill; ++dy) {
+            const int yy = v + dy;
+            if (yy < 0 || yy >= H) continue;
+            const float* row = in.actor_depth.ptr<float>(yy);
+            for (int dx = -fill; dx <= fill; ++dx) {
+              const int xx = u + dx;
+              if (xx < 0 || xx >= W) continue;
+              const float z = row[xx];
+              if (!std::isfinite(z)) continue;
+              const int d2 = dx * dx + dy * dy;
+              if (d2 < best_d2 || (d2 == best_d2 && z < best)) {
+                best_d2 = d2;
+                best = z;
+              }
+            }
+          }
+          if (std::isfinite(best)) {
+            za = best;
+            ++filled;
+          }
+        }
+        float w;
+        if (!std::isfinite(za)) {
+          w = 1.f;
+          code = kFrontFallback;
+          ++fallback;
+        } else if (!std::isfinite(zc)) {
+          w = 1.f;
+        } else if (band > 0) {
+          w = smoothstep01((zc - za) / band + 0.5f);
+        } else {
+          w = za < zc ? 1.f : 0.f;
+        }
+        if (code != kFrontFallback) {
+          code = w >= 0.5f ? kFrontActor : kFrontCg;
+          if (code == kFrontActor) ++actor_front; else ++cg_front;
+        }
+        a = alpha * w;
+      }
+      const std::uint8_t* fp = f + 3 * u;
+      if (a >= 1.f && !debug_layers) {
+        // The plate as shot, byte for byte (decode + encode is the identity on 8-bit codes).
+        o[3 * u + 0] = fp[0];
+        o[3 * u + 1] = fp[1];
+        o[3 * u + 2] = fp[2];
+        continue;
+      }
+      const float ob = a * dec[fp[0]] + (1 - a) * cb;
+      const float og = a * dec[fp[1]] + (1 - a) * cgc;
+      const float orr = a * dec[fp[2]] + (1 - a) * cr;
+      o[3 * u + 0] = encode(enc, ob);
+      o[3 * u + 1] = encode(enc, og);
+      o[3 * u + 2] = encode(enc, orr);
+      if (debug_layers) {
+        r.layer_alpha.ptr<float>(v)[u] = a;
+        r.layer_actor_depth.ptr<float>(v)[u] = alpha > 0 ? za : kInf;
+        r.layer_cg_depth.ptr<float>(v)[u] = zc;
+        r.layer_front.ptr<std::uint8_t>(v)[u] = code;
+        float* lin = r.linear.ptr<float>(v) + 3 * u;
+        lin[0] = ob;
+        lin[1] = og;
+        lin[2] = orr;
+      }
+    }
+  }
+  r.stats.actor_px = actor_px;
+  r.stats.actor_front_px = actor_front;
+  r.stats.cg_front_px = cg_front;
+  r.stats.edge_filled_px = filled;
+  r.stats.fallback_px = fallback;
+  r.stats.ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  return r;
+}
+
+cv::Mat depthPreview(const cv::Mat& depth_m, double near_m, double far_m) {
+  cv::Mat t(depth_m.size(), CV_8UC1, cv::Scalar(0)), valid(depth_m.size(), CV_8UC1, cv::Scalar(0));
+  const double span = far_m > near_m ? far_m - near_m : 1.0;
+  for (int y = 0; y < depth_m.rows; ++y) {
+    const float* d = depth_m.ptr<float>(y);
+    for (int x = 0; x < depth_m.cols; ++x) {
+      if (!std::isfinite(d[x])) continue;
+      t.at<uchar>(y, x) = cv::saturate_cast<uchar>(40 + 215 * (far_m - d[x]) / span);
+      valid.at<uchar>(y, x) = 255;
+    }
+  }
+  cv::Mat colour;
+  cv::applyColorMap(t, colour, cv::COLORMAP_TURBO);
+  cv::Mat out(depth_m.size(), CV_8UC3, cv::Scalar::all(0));
+  colour.copyTo(out, valid);
+  return out;
+}
+
+cv::Mat frontPreview(const cv::Mat& front) {
+  static const cv::Vec3b colours[4] = {{0, 0, 0}, {40, 40, 220}, {40, 200, 40}, {220, 40, 220}};
+  cv::Mat out(front.size(), CV_8UC3);
+  for (int y = 0; y < front.rows; ++y) {
+    const std::uint8_t* f = front.ptr<std::uint8_t>(y);
+    cv::Vec3b* o = out.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < front.cols; ++x) o[x] = colours[std::min<int>(f[x], 3)];
+  }
+  return out;
+}
+
+}  // namespace previz::composite

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# `previz run`, `previz composite` and `previz bench run` as a user meets them: the documented
+# files (docs/formats.md, "Run output" and "Composite output"), the same composite from both
+# commands, the JSON summaries, and clear failures that name the culprit.
+#   run_cli_test.sh PREVIZ_BIN TMPDIR
+set -uo pipefail
+bin="$1"; tmp="$2"
+rm -rf "$tmp"; mkdir -p "$tmp"
+source "$(dirname "${BASH_SOURCE[0]}")/../cli/checks.sh"
+
+# A small studio take: 4 witnesses at 320x180, main 480x270, 3 frames.
+if ! "$bin" synth --preset studio --out "$tmp/take" --frames 3 --cams 4 --size 320x180 --no-meshes --quiet >/dev/null 2>&1; then
+  fail "synth studio take"; finish; exit 1
+fi
+take="$tmp/take"
+
+if "$bin" run --take "$take" --out "$tmp/run" --voxel 0.02 --layers --meshes --video composite.avi --json --quiet \
+    > "$tmp/run.json" 2> "$tmp/run.err"; then ok "run exits 0"; else fail "run: $(cat "$tmp/run.err")"; fi
+missing=0
+for f in 000000 000001 000002; do
+  for p in composite/$f.png depth/$f.exr mesh/$f.ply layers/alpha/$f.exr layers/actor_depth/$f.exr \
+           layers/cg_depth/$f.exr layers/front/$f.png; do
+    [ -s "$tmp/run/$p" ] || { missing=1; echo "missing $p"; }
+  done
+done
+[ $missing -eq 0 ] && ok "run writes composites, depth, meshes and layers" || fail "run outputs missing"
+[ -s "$tmp/run/composite.avi" ] && ok "run writes the video" || fail "no video"
+[ "$(wc -l < "$tmp/run/poses.jsonl")" -eq 3 ] && ok "poses.jsonl has one line per frame" || fail "poses.jsonl"
+if python3 - "$tmp/run.json" "$tmp/run/run.jsonl" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert s["command"] == "run" and s["frames"] == [0, 1, 2], s
+for k in ("key", "carve", "depth", "composite", "read", "write"):
+    assert s["mean_ms"][k] > 0, k
+lines = [json.loads(l) for l in open(sys.argv[2])]
+assert [l["frame"] for l in lines] == [0, 1, 2]
+assert all(l["composite"]["actor_px"] > 100 for l in lines), lines
+PY
+then ok "run JSON summary and run.jsonl"; else fail "run JSON"; fi
+
+# previz composite on run's depth: the same key and depth give the same composites, bit for bit.
+if "$bin" composite --take "$take" --depth "$tmp/run/depth" --out "$tmp/comp" --json --quiet > "$tmp/comp.json" 2> "$tmp/comp.err"; then
+  ok "composite exits 0"; else fail "composite: $(cat "$tmp/comp.err")"; fi
+same=1
+for f in 000000 000001 000002; do cmp -s "$tmp/run/composite/$f.png" "$tmp/comp/composite/$f.png" || same=0; done
+[ $same -eq 1 ] && ok "composite equals run's composite" || fail "composite differs from run's"
+python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['command']=='composite' and j['actor_px'] > 1000 and j['fallback_px'] < 0.01 * j['actor_px'], j" "$tmp/comp.json" \
+  && ok "composite JSON" || fail "composite JSON"
+
+if "$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 > "$tmp/bench.json" 2> "$tmp/bench.err" && python3 - "$tmp/bench.json" <<'PY'
+import json, sys
+j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
+assert j["stage"] == "run" and j["ms"] > 0 and j["fps"] > 0 and j["target_ms"] == 20, j
+assert [s["stage"] for s in j["stages"]] == ["key", "carve", "depth", "composite"], j
+assert j["largest_stage"] in ("key", "carve", "depth", "composite")
+PY
+then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
+
+# Failures that name the culprit.
+expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet
+expect_fail "frames outside the take name the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 7:9 --quiet
+cp -r "$take" "$tmp/take_nocg"; rm "$tmp/take_nocg/cg/depth/000001.exr"
+expect_fail "missing CG depth names the file and frame" "cg/depth/000001.exr.*frame 1|frame 1.*cg/depth/000001.exr" \
+  "$bin" run --take "$tmp/take_nocg" --out "$tmp/o" --voxel 0.02 --quiet
+rm "$tmp/take_nocg/cg/camera.json"
+expect_fail "missing CG camera names the file" "camera.json" "$bin" composite --take "$tmp/take_nocg" --out "$tmp/o"
+expect_fail "missing depth frame names the file" "nodepth/000000.exr" "$bin" composite --take "$take" --depth "$tmp/nodepth" --out "$tmp/o"
+printf '{"tracked": 1}\n' > "$tmp/tracked.jsonl"
+expect_fail "bad tracked poses name the file" "tracked.jsonl" "$bin" run --take "$take" --out "$tmp/o" --tracked-main-poses "$tmp/tracked.jsonl" --quiet
+expect_fail "bad depth band names the field" "depth_band_m" "$bin" composite --take "$take" --out "$tmp/o" --depth-band -1
+finish

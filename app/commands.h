@@ -18,5 +18,6 @@ Runner addRigCommand(CLI::App& app);
 // `previz calib lens`, registered under the calib command.
 Runner addLensCommand(CLI::App& calib);
 Runner addCarveCommand(CLI::App& app);
+Runner addBatchCommand(CLI::App& app);
 
 }  // namespace previz::app

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   add("camera", previz::app::addCameraCommand);
   add("calib", previz::app::addCalibCommand);
   add("carve", previz::app::addCarveCommand);
+  add("batch", previz::app::addBatchCommand);
   add("rig", previz::app::addRigCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");

@@ -182,7 +182,7 @@ int runSubmit(const BatchArgs& a, bool resume) {
   }
   std::vector<int> todo = unfinishedShards(m);
   std::vector<int> active;
-  if (resume && use_slurm) {
+  if (use_slurm) {
     // Only what is missing: a shard the queue still runs (or will run) is left to it.
     const std::map<int, std::string> states = backend->schedulerStates(m);
     std::vector<int> keep;

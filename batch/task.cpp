@@ -65,6 +65,7 @@ void writeState(const Manifest& m, int shard, const std::string& state, long lon
 
 TaskResult runShardTask(const Manifest& m, int shard_id) {
   const Clock::time_point t0 = Clock::now();
+  const long long started = unixMs();  // before the input checksums: they are the task's overhead
   if (shard_id < 0 || shard_id >= static_cast<int>(m.shards.size())) {
     ErrorContext c;
     c.field = "--shard";
@@ -74,7 +75,6 @@ TaskResult runShardTask(const Manifest& m, int shard_id) {
   requireUnchangedInputs(m);
   const ShardPlan& shard = m.shards[static_cast<size_t>(shard_id)];
   const TakePlan& take = m.takes[static_cast<size_t>(shard.take)];
-  const long long started = unixMs();
   writeState(m, shard_id, "running", started, nullptr);
 
   TaskResult r;

@@ -16,11 +16,11 @@ if ! slurm_cluster_available; then
 fi
 rm -rf "$tmp"; mkdir -p "$tmp"
 
-# Two takes of one rig, 8 frames each, 4 witnesses at 320x180 (the studio's rig follows the seed,
+# Two takes of one rig, 4 frames each (1 frame per shard), 4 witnesses at 320x180 (the studio's rig follows the seed,
 # so take b keeps seed 1 and differs by its sensor noise).
-"$bin" synth --preset studio --out "$tmp/take_a" --frames 8 --cams 4 --size 320x180 --seed 1 \
+"$bin" synth --preset studio --out "$tmp/take_a" --frames 4 --cams 4 --size 320x180 --seed 1 \
   --no-meshes --quiet >/dev/null 2>&1 || { fail "synth take_a"; finish; exit 1; }
-"$bin" synth --preset studio --out "$tmp/take_b" --frames 8 --cams 4 --size 320x180 --seed 1 --noise 2 \
+"$bin" synth --preset studio --out "$tmp/take_b" --frames 4 --cams 4 --size 320x180 --seed 1 --noise 2 \
   --no-meshes --quiet >/dev/null 2>&1 || { fail "synth take_b"; finish; exit 1; }
 cmp -s "$tmp/take_a/truth/rig.json" "$tmp/take_b/truth/rig.json" && ok "both takes share one rig" || fail "rigs differ"
 plan=(--takes "$tmp/take_a" "$tmp/take_b" --rig "$tmp/take_a/truth/rig.json" --quality preview --shards-per-take 4)
@@ -92,11 +92,11 @@ grep -q 'frame 0 redone' "$tmp/fault/slurm/logs/"*_0.out && ok "task log names t
 find "$tmp/fault/work" -path '*/carve/*/*' -type f -printf '%P %T@\n' | sort >"$tmp/after.txt"
 # Every file that existed before is unchanged unless it is take_a frame 0's or belongs to a
 # cancelled shard's frame that was unfinished (those appear or are rewritten).
-# Shard t of the plan (4 per take, round robin): take_a for t < 4, frames t%4 and t%4 + 4.
+# Shard t of the plan (4 per take of 4 frames, round robin): take_a for t < 4, frame t % 4.
 cancel_frames=""
 for t in $cancelled; do
   take=$([ "$t" -lt 4 ] && echo take_a || echo take_b)
-  cancel_frames+=" $take/$(printf %06d $((t % 4))) $take/$(printf %06d $((t % 4 + 4)))"
+  cancel_frames+=" $take/$(printf %06d $((t % 4)))"
 done
 bad=0; redone=0
 while read -r path t; do

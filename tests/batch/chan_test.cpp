@@ -16,7 +16,7 @@ Eigen::Matrix3d axis(double deg, const Eigen::Vector3d& a) {
   return Eigen::AngleAxisd(deg * M_PI / 180, a).toRotationMatrix();
 }
 
-TEST(Chan, RotationOrderZXYAppliesZThenXThenY) {
+TEST(BatchChan, RotationOrderZXYAppliesZThenXThenY) {
   const Eigen::Vector3d r(20, -35, 70);  // rx, ry, rz
   const Eigen::Matrix3d expected =
       axis(r.y(), Eigen::Vector3d::UnitY()) * axis(r.x(), Eigen::Vector3d::UnitX()) * axis(r.z(), Eigen::Vector3d::UnitZ());
@@ -28,7 +28,7 @@ TEST(Chan, RotationOrderZXYAppliesZThenXThenY) {
   EXPECT_NEAR(e.z(), 90, 1e-9);
 }
 
-TEST(Chan, EulerAnglesRoundTripForRandomRotationsAndGimbalLock) {
+TEST(BatchChan, EulerAnglesRoundTripForRandomRotationsAndGimbalLock) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int i = 0; i < 1000; ++i) {
@@ -39,7 +39,7 @@ TEST(Chan, EulerAnglesRoundTripForRandomRotationsAndGimbalLock) {
   EXPECT_LT((rotationZXYDeg(eulerZXYDeg(lock)) - lock).norm(), 1e-9);
 }
 
-TEST(Chan, UnwrapKeepsASpinContinuous) {
+TEST(BatchChan, UnwrapKeepsASpinContinuous) {
   std::vector<std::pair<int, Pose>> poses;
   for (int f = 0; f < 40; ++f) {
     Pose T = Pose::Identity();
@@ -51,7 +51,7 @@ TEST(Chan, UnwrapKeepsASpinContinuous) {
     EXPECT_NEAR(keys[i].rotate_deg.y() - keys[i - 1].rotate_deg.y(), 10.0, 1e-6) << "frame " << i;
 }
 
-TEST(Chan, YUpWorldAndCameraAxesFollowNukeAndMaya) {
+TEST(BatchChan, YUpWorldAndCameraAxesFollowNukeAndMaya) {
   // World z up becomes y up; world y (into the stage) becomes -z.
   EXPECT_LT((yUpFromZUp() * Eigen::Vector3d(0, 0, 1) - Eigen::Vector3d(0, 1, 0)).norm(), 1e-15);
   EXPECT_LT((yUpFromZUp() * Eigen::Vector3d(0, 1, 0) - Eigen::Vector3d(0, 0, -1)).norm(), 1e-15);
@@ -73,7 +73,7 @@ TEST(Chan, YUpWorldAndCameraAxesFollowNukeAndMaya) {
   EXPECT_LT((cameraPoseFromPost(P).matrix() - T.matrix()).norm(), 1e-12);
 }
 
-TEST(Chan, FileRoundTripAndBadLinesNameTheLine) {
+TEST(BatchChan, FileRoundTripAndBadLinesNameTheLine) {
   const auto dir = test::scratchDir("batch", "chan");
   std::vector<ChanKey> keys(2);
   keys[0] = {1001, Eigen::Vector3d(1.25, -0.5, 3.0), Eigen::Vector3d(10, 20, -30)};

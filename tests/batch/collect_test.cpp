@@ -69,7 +69,7 @@ std::map<int, Pose> truthMainPoses(const fs::path& file) {
   return poses;
 }
 
-TEST(Collect, MainCameraChanReadsBackToTheTruePosesWithinAMicrometre) {
+TEST(BatchCollect, MainCameraChanReadsBackToTheTruePosesWithinAMicrometre) {
   const test::BatchFixture& f = test::batchFixture();
   const std::map<int, Pose> truth = truthMainPoses(f.take / "truth" / "main_poses.jsonl");
   const std::vector<ChanKey> keys = readChan(f.collected / "take" / "camera" / "main.chan");
@@ -90,7 +90,7 @@ TEST(Collect, MainCameraChanReadsBackToTheTruePosesWithinAMicrometre) {
   EXPECT_EQ(j["frames"].size(), 4u);
 }
 
-TEST(Collect, ObjAndPlySequencesReadBackToTheCarvedVertices) {
+TEST(BatchCollect, ObjAndPlySequencesReadBackToTheCarvedVertices) {
   const test::BatchFixture& f = test::batchFixture();
   for (int frame = 0; frame < 4; ++frame) {
     const std::string stem = frameStem(frame);
@@ -149,7 +149,7 @@ TEST(Collect, ObjAndPlySequencesReadBackToTheCarvedVertices) {
   }
 }
 
-TEST(Collect, PcdSequenceReadsInPclAsThePointsOfTheFrame) {
+TEST(BatchCollect, PcdSequenceReadsInPclAsThePointsOfTheFrame) {
   const test::BatchFixture& f = test::batchFixture();
   for (int frame = 0; frame < 4; ++frame) {
     const fs::path pcd = f.collected / "take" / "points" / sequenceName("actor", frame, "pcd");
@@ -169,7 +169,7 @@ TEST(Collect, PcdSequenceReadsInPclAsThePointsOfTheFrame) {
 
 // OpenCV 4.6's EXR reader knows only R, G, B, Y and A channels: a depth EXR's "Z" channel (what
 // Nuke reads as depth.Z) comes back as zeros, so OpenCV cannot check this format; OpenEXR does.
-TEST(Collect, DepthExrSequenceIsCarvesDepthAndLiesOnTheActor) {
+TEST(BatchCollect, DepthExrSequenceIsCarvesDepthAndLiesOnTheActor) {
   const test::BatchFixture& f = test::batchFixture();
   for (int frame = 0; frame < 4; ++frame) {
     const fs::path exr = f.collected / "take" / "depth" / "main" / sequenceName("main", frame, "exr");
@@ -197,7 +197,7 @@ TEST(Collect, DepthExrSequenceIsCarvesDepthAndLiesOnTheActor) {
   }
 }
 
-TEST(Collect, RefusesUnfinishedFramesNamingThem) {
+TEST(BatchCollect, RefusesUnfinishedFramesNamingThem) {
   const test::BatchFixture& f = test::batchFixture();
   const fs::path job = test::scratchDir("batch", "unfinished") / "job";
   fs::copy(f.job, job, fs::copy_options::recursive);

@@ -26,7 +26,7 @@ PlanOptions planFor(const test::BatchFixture& f, const fs::path& rig, const fs::
   return o;
 }
 
-TEST(Manifest, ShardsCoverEveryFrameOnceAndCommandsCarryTheShard) {
+TEST(BatchManifest, ShardsCoverEveryFrameOnceAndCommandsCarryTheShard) {
   const test::BatchFixture& f = test::batchFixture();
   PlanOptions o = planFor(f, f.take / "truth" / "rig.json", test::scratchDir("batch", "plan") / "job");
   o.shards_per_take = 3;
@@ -56,7 +56,7 @@ TEST(Manifest, ShardsCoverEveryFrameOnceAndCommandsCarryTheShard) {
   EXPECT_EQ(arrayList({7, 0, 1, 2, 5, 8}), "0-2,5,7-8");
 }
 
-TEST(Manifest, ChangedRigBetweenPlanAndResumeIsRefusedNamingTheFile) {
+TEST(BatchManifest, ChangedRigBetweenPlanAndResumeIsRefusedNamingTheFile) {
   const test::BatchFixture& f = test::batchFixture();
   const fs::path dir = test::scratchDir("batch", "rigchange");
   const fs::path rig = dir / "rig.json";
@@ -100,7 +100,7 @@ std::map<std::string, fs::file_time_type> frameFileTimes(const fs::path& job) {
   return times;
 }
 
-TEST(Ledger, DamagedFrameIsRedoneLocallyAndNothingElseIsRewritten) {
+TEST(BatchLedger, DamagedFrameIsRedoneLocallyAndNothingElseIsRewritten) {
   const test::BatchFixture& f = test::batchFixture();
   const fs::path job = test::scratchDir("batch", "ledger") / "job";
   fs::copy(f.job, job, fs::copy_options::recursive);

@@ -59,7 +59,7 @@ PageCheck checkPage(const fs::path& page, const fs::path& work) {
   return c;
 }
 
-TEST(SummaryPage, OpensInHeadlessChromiumWithEveryImageAndLinkResolvingAndNoConsoleErrors) {
+TEST(BatchSummaryPage, OpensInHeadlessChromiumWithEveryImageAndLinkResolvingAndNoConsoleErrors) {
   const test::BatchFixture& f = test::batchFixture();
   const fs::path work = test::scratchDir("batch", "chromium");
 

@@ -106,7 +106,14 @@ std::string trim(const std::string& s) {
 
 class SlurmBackend : public Backend {
  public:
-  explicit SlurmBackend(const SlurmOptions& o) : o_(o) {}
+  explicit SlurmBackend(const SlurmOptions& o) : o_(o) {
+    ErrorContext c;
+    if (o_.cpus_per_task < 1 || o_.max_running < 0) {
+      c.field = o_.cpus_per_task < 1 ? "--cpus-per-task" : "--max-running";
+      throw Error("batch: cpus per task must be >= 1 and max running >= 0 (got " +
+                      std::to_string(o_.cpus_per_task) + ", " + std::to_string(o_.max_running) + ")", c);
+    }
+  }
   std::string name() const override { return "slurm"; }
 
   Submission submit(const Manifest& m, const std::vector<int>& shards) override {

@@ -366,10 +366,24 @@ Manifest readManifest(const fs::path& job_dir) {
   return m;
 }
 
-std::vector<InputChange> changedInputs(const Manifest& manifest) {
+namespace {
+bool under(const std::string& path, const fs::path& dir) {
+  const std::string d = dir.string() + "/";
+  return path.compare(0, d.size(), d) == 0;
+}
+}  // namespace
+
+std::vector<InputChange> changedInputs(const Manifest& manifest, const TakePlan* take) {
   std::vector<InputChange> changes;
   std::error_code ec;
   for (const InputFile& f : manifest.inputs) {
+    const bool shared = f.path == manifest.rig.string() || f.path == manifest.props.string() ||
+                        (take && f.path == take->main_poses.string());
+    if (take && !shared && !under(f.path, take->dir)) {
+      bool other_take = false;
+      for (const TakePlan& t : manifest.takes) other_take = other_take || under(f.path, t.dir);
+      if (other_take) continue;
+    }
     if (!fs::is_regular_file(f.path, ec)) {
       changes.push_back({f.path, "missing"});
       continue;
@@ -385,8 +399,8 @@ std::vector<InputChange> changedInputs(const Manifest& manifest) {
   return changes;
 }
 
-void requireUnchangedInputs(const Manifest& manifest) {
-  const std::vector<InputChange> changes = changedInputs(manifest);
+void requireUnchangedInputs(const Manifest& manifest, const TakePlan* take) {
+  const std::vector<InputChange> changes = changedInputs(manifest, take);
   if (changes.empty()) return;
   std::string more;
   if (changes.size() > 1) more = " (and " + std::to_string(changes.size() - 1) + " more input files)";

@@ -98,10 +98,11 @@ struct InputChange {
   std::string path;
   std::string what;  // "missing", "size 123 -> 456", "content changed (checksum a -> b)"
 };
-// Re-checksums every input of the manifest.
-std::vector<InputChange> changedInputs(const Manifest& manifest);
+// Re-checksums every input of the manifest; with 'take', only the files of that take and those
+// of no take (rig, props, main poses): what one shard's task reads.
+std::vector<InputChange> changedInputs(const Manifest& manifest, const TakePlan* take = nullptr);
 // Throws Error naming the first changed file (and how many more) unless nothing changed.
-void requireUnchangedInputs(const Manifest& manifest);
+void requireUnchangedInputs(const Manifest& manifest, const TakePlan* take = nullptr);
 
 // frame -> "%06d"
 std::string frameStem(int frame);

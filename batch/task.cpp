@@ -72,9 +72,9 @@ TaskResult runShardTask(const Manifest& m, int shard_id) {
     throw Error("shard " + std::to_string(shard_id) + " is not in the manifest (0.." +
                     std::to_string(m.shards.size() - 1) + ")", c);
   }
-  requireUnchangedInputs(m);
   const ShardPlan& shard = m.shards[static_cast<size_t>(shard_id)];
   const TakePlan& take = m.takes[static_cast<size_t>(shard.take)];
+  requireUnchangedInputs(m, &take);
   writeState(m, shard_id, "running", started, nullptr);
 
   TaskResult r;

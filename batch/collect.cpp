@@ -304,13 +304,24 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
                     htmlEscape(take.name + "/" + json) + "\">JSON</a></li>\n";
     }
 
-    // Prop animation, when a track stage left its output.
+    // Prop animation, when a track stage left its output: one file for the take, or one line
+    // per frame in track/frames/%06d.json (what a sharded stage writes without racing).
     const fs::path track = m.job_dir / take.work / "track" / "props.jsonl";
+    std::vector<fs::path> track_files;
     std::error_code ec;
     if (fs::is_regular_file(track, ec)) {
+      track_files.push_back(track);
+    } else {
+      for (int f : take.frames) {
+        const fs::path p = m.job_dir / take.work / "track" / "frames" / (frameStem(f) + ".json");
+        if (done[ti].count(f) && fs::is_regular_file(p, ec)) track_files.push_back(p);
+      }
+    }
+    if (!track_files.empty()) {
       std::map<std::string, std::vector<PropSample>> by_name;
-      for (const PropSample& s : readPropTrack(track))
-        if (done[ti].count(s.frame)) by_name[s.name].push_back(s);
+      for (const fs::path& file : track_files)
+        for (const PropSample& s : readPropTrack(file))
+          if (done[ti].count(s.frame)) by_name[s.name].push_back(s);
       nlohmann::json props = nlohmann::json::array();
       for (const auto& [name, samples] : by_name) {
         std::vector<std::pair<int, Pose>> world, post;
@@ -327,7 +338,9 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
                                     {"kind", "prop"}, {"units", "m"}, {"angles", "degrees"},
                                     {"rotation_order", "ZXY"}, {"world", kYUpNote},
                                     {"object_axes", "the prop frame of props.json"},
-                                    {"source", track.string()}, {"frames", frames}});
+                                    {"source", track_files.size() == 1 ? track_files[0].string()
+                                                                       : (track.parent_path() / "frames").string()},
+                                    {"frames", frames}});
         props.push_back({{"name", name}, {"chan", chan}, {"json", json}});
         anim_links += "<li>prop <code>" + htmlEscape(name) + "</code>: <a href=\"" +
                       htmlEscape(take.name + "/" + chan) + "\">.chan</a> <a href=\"" +

@@ -197,6 +197,41 @@ TEST(BatchCollect, DepthExrSequenceIsCarvesDepthAndLiesOnTheActor) {
   }
 }
 
+// The prop export path, fed with the synthetic studio's TRUE prop poses (truth/props.jsonl has
+// the track output's schema less "name" and "state") in place of a track stage's output: the
+// .chan must read back to those poses. No tracking is run or claimed here.
+TEST(BatchCollect, PropChanReadsBackToThePosesItWasGiven) {
+  const test::BatchFixture& f = test::batchFixture();
+  const fs::path dir = test::scratchDir("batch", "props");
+  const fs::path job = dir / "job";
+  fs::copy(f.job, job, fs::copy_options::recursive);
+  fs::create_directories(job / "work" / "take" / "track");
+  fs::copy_file(f.take / "truth" / "props.jsonl", job / "work" / "take" / "track" / "props.jsonl");
+  CollectOptions o;
+  o.out = dir / "out";
+  o.frame_offset = 1001;
+  collectBatch(readManifest(job), o);
+  const std::vector<PropSample> given = readPropTrack(f.take / "truth" / "props.jsonl");
+  const std::vector<ChanKey> keys = readChan(o.out / "take" / "props" / "prop0.chan");
+  ASSERT_EQ(keys.size(), 4u);
+  ASSERT_EQ(given.size(), 4u);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    EXPECT_EQ(keys[i].frame, given[i].frame + 1001);
+    // y-up object pose back to previz's world: A^T · T.
+    Pose T = keys[i].pose();
+    T.linear() = yUpFromZUp().transpose() * T.linear();
+    T.translation() = yUpFromZUp().transpose() * T.translation();
+    EXPECT_LT((T.translation() - given[i].T_world_prop.translation()).norm(), 1e-6) << "frame " << given[i].frame;
+    EXPECT_LT(rotationDistance(T, given[i].T_world_prop), 1e-6) << "frame " << given[i].frame;
+  }
+  // The crate is carried 1.1–1.45 m above the floor: y-up ty says so.
+  EXPECT_GT(keys[0].translate.y(), 1.0);
+  EXPECT_LT(keys[0].translate.y(), 1.6);
+  EXPECT_EQ(readJsonFile(o.out / "take" / "props" / "prop0.json")["rotation_order"], "ZXY");
+  // The page links the prop's files.
+  EXPECT_NE(readTextFile(o.out / "index.html").find("take/props/prop0.chan"), std::string::npos);
+}
+
 TEST(BatchCollect, RefusesUnfinishedFramesNamingThem) {
   const test::BatchFixture& f = test::batchFixture();
   const fs::path job = test::scratchDir("batch", "unfinished") / "job";

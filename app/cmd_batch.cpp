@@ -150,13 +150,22 @@ std::unique_ptr<batch::Backend> slurmBackend(const BatchArgs& a) {
 // Polls the queue until none of the batch's tasks is pending or running.
 void waitForSlurm(batch::Backend& backend, const batch::Manifest& m, const BatchArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
+  auto last = t0;
+  int last_active = -1;
   for (;;) {
     const std::map<int, std::string> states = backend.schedulerStates(m);
-    int active = 0;
-    for (const auto& [shard, state] : states) active += schedulerActive(state) ? 1 : 0;
-    if (!a.quiet)
-      std::fprintf(stderr, "[batch] slurm: %d tasks pending or running | elapsed %.1f s\n", active,
-                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    int active = 0, running = 0;
+    for (const auto& [shard, state] : states) {
+      active += schedulerActive(state) ? 1 : 0;
+      running += state == "RUNNING" ? 1 : 0;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (!a.quiet && (active != last_active || std::chrono::duration<double>(now - last).count() >= 10)) {
+      std::fprintf(stderr, "[batch] slurm: %d tasks running, %d pending | elapsed %.1f s\n", running,
+                   active - running, std::chrono::duration<double>(now - t0).count());
+      last = now;
+      last_active = active;
+    }
     if (active == 0) return;
     std::this_thread::sleep_for(std::chrono::duration<double>(a.poll_s));
   }

@@ -12,18 +12,19 @@ slurm_cluster_pids=()
 
 slurm_cluster_available() {
   local p
-  for p in munged slurmctld slurmd sbatch squeue scancel sinfo ss; do
+  for p in munged slurmctld slurmd sbatch squeue scancel sinfo; do
     command -v "$p" >/dev/null 2>&1 || { slurm_cluster_missing="$p"; return 1; }
   done
   return 0
 }
 
-# A TCP port nobody listens on (and the next one too).
+# A TCP port nobody uses (and the next one too), from /proc/net/tcp{,6} (no iproute2 needed).
 slurm_cluster_free_port() {
-  local port
+  local port used
+  used=$(awk 'NR > 1 {split($2, a, ":"); print a[2]}' /proc/net/tcp /proc/net/tcp6 2>/dev/null | sort -u)
   for _ in $(seq 1 50); do
     port=$((20000 + RANDOM % 20000))
-    if ! ss -ltnH 2>/dev/null | awk '{print $4}' | grep -Eq ":(${port}|$((port + 1)))$"; then
+    if ! grep -qiE "^($(printf %04X $port)|$(printf %04X $((port + 1))))$" <<<"$used"; then
       echo "$port"; return 0
     fi
   done

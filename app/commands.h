@@ -24,5 +24,6 @@ Runner addCompositeCommand(CLI::App& app);
 Runner addRunCommand(CLI::App& app);
 // `previz bench run` (the bench command with its verbs).
 Runner addBenchCommand(CLI::App& app);
+Runner addBatchCommand(CLI::App& app);
 
 }  // namespace previz::app

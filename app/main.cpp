@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   add("camera", previz::app::addCameraCommand);
   add("calib", previz::app::addCalibCommand);
   add("carve", previz::app::addCarveCommand);
+  add("batch", previz::app::addBatchCommand);
   add("rig", previz::app::addRigCommand);
   add("track", previz::app::addTrackCommand);
   add("composite", previz::app::addCompositeCommand);

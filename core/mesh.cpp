@@ -52,12 +52,13 @@ float getF32(const unsigned char* p) {
 
 }  // namespace
 
-void writePly(const TriangleMesh& mesh, const std::filesystem::path& path) {
+void writePly(const TriangleMesh& mesh, const std::filesystem::path& path,
+              const std::string& world_frame) {
   checkMesh(mesh, path);
   std::ostringstream header;
   header << "ply\n"
          << "format binary_little_endian 1.0\n"
-         << "comment previz mesh: units metres, world frame z up (floor z = 0)\n"
+         << "comment previz mesh: units metres, " << world_frame << "\n"
          << "element vertex " << mesh.vertices.size() << "\n"
          << "property float x\nproperty float y\nproperty float z\n"
          << "property float nx\nproperty float ny\nproperty float nz\n"
@@ -77,11 +78,12 @@ void writePly(const TriangleMesh& mesh, const std::filesystem::path& path) {
   writeFileAtomic(path, out);
 }
 
-void writeObj(const TriangleMesh& mesh, const std::filesystem::path& path) {
+void writeObj(const TriangleMesh& mesh, const std::filesystem::path& path,
+              const std::string& world_frame) {
   checkMesh(mesh, path);
   std::string out;
   out.reserve(mesh.vertices.size() * 80 + mesh.faces.size() * 40 + 256);
-  out += "# previz mesh: units metres, world frame z up (floor z = 0)\n";
+  out += "# previz mesh: units metres, " + world_frame + "\n";
   out += "# " + std::to_string(mesh.vertices.size()) + " vertices, " +
          std::to_string(mesh.faces.size()) + " faces\n";
   char line[160];

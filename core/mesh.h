@@ -3,6 +3,7 @@
 // with vertex normals. The synthetic studio writes its true actor meshes with these; carving
 // writes the carved hull with them.
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -17,8 +18,11 @@ struct TriangleMesh {
 
 // Atomic writers; readPly reads binary little-endian PLY as writePly writes it. Errors name
 // the file.
-void writePly(const TriangleMesh& mesh, const std::filesystem::path& path);
-void writeObj(const TriangleMesh& mesh, const std::filesystem::path& path);
+// 'world_frame' is the header comment's frame note (batch/collect writes a y-up variant).
+void writePly(const TriangleMesh& mesh, const std::filesystem::path& path,
+              const std::string& world_frame = "world frame z up (floor z = 0)");
+void writeObj(const TriangleMesh& mesh, const std::filesystem::path& path,
+              const std::string& world_frame = "world frame z up (floor z = 0)");
 TriangleMesh readPly(const std::filesystem::path& path);
 
 }  // namespace previz

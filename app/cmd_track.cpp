@@ -53,7 +53,7 @@ struct TrackArgs {
   double fps = 0;
   float decimate = 1.0f, sigma = 0.8f;
   int detector_threads = 1, threads = 0, full_every = 30;
-  bool no_refine = false, no_filter = false, no_roi = false;
+  bool no_refine = false, no_filter = false, no_roi = false, not_srgb = false;
   std::vector<std::string> per_camera;
   bool json = false, quiet = false;
 };
@@ -70,7 +70,7 @@ struct CameraArgs {
   std::string take, rig, tags, camera = "main", out, truth, frames;
   double fps = 0;
   float decimate = 1.0f, sigma = 0.8f;
-  bool no_filter = false, json = false, quiet = false;
+  bool no_filter = false, not_srgb = false, json = false, quiet = false;
 };
 
 void parseFrames(const std::string& text, tracking::TrackRunOptions& o) {
@@ -159,6 +159,7 @@ int runTrack(const TrackArgs& a) {
   o.tracker.detector.sigma = a.sigma;
   o.tracker.detector.threads = a.detector_threads;
   o.tracker.detector.refine_edges = !a.no_refine;
+  o.tracker.detector.linear_light = !a.not_srgb;
   for (const std::string& pc : a.per_camera) parsePerCamera(pc, o.tracker.detector, o.tracker.per_camera);
   o.tracker.threads = a.threads;
   o.tracker.full_frame_every = a.full_every;
@@ -289,6 +290,7 @@ int runCamera(const CameraArgs& a) {
   parseFrames(a.frames, o);
   o.tracker.detector.decimate = a.decimate;
   o.tracker.detector.sigma = a.sigma;
+  o.tracker.detector.linear_light = !a.not_srgb;
   o.tracker.filter_enabled = !a.no_filter;
   o.validate();
   std::unique_ptr<ProgressLine> line;
@@ -343,6 +345,7 @@ Runner addTrackCommand(CLI::App& app) {
   cmd->add_option("--sigma", a->sigma, "libapriltag quad_sigma (blur before the quad search)")->capture_default_str();
   cmd->add_option("--detector-threads", a->detector_threads, "libapriltag threads per camera")->capture_default_str();
   cmd->add_flag("--no-refine-edges", a->no_refine, "Do not refine tag edges on the image gradient");
+  cmd->add_flag("--not-srgb", a->not_srgb, "8-bit images are linear, not sRGB-encoded (detect on them as they are)");
   cmd->add_option("--detector", a->per_camera,
                   "Per-camera detector CAM:decimate=2,sigma=0.8,threads=1,refine-edges=1 (repeatable)");
   cmd->add_option("--threads", a->threads, "OpenMP threads over cameras (0 = all cores)")->capture_default_str();
@@ -381,6 +384,7 @@ Runner addTrackCommand(CLI::App& app) {
   cam->add_option("--decimate", c->decimate, "libapriltag quad_decimate")->capture_default_str();
   cam->add_option("--sigma", c->sigma, "libapriltag quad_sigma")->capture_default_str();
   cam->add_flag("--no-filter", c->no_filter, "Report the per-frame solve unfiltered");
+  cam->add_flag("--not-srgb", c->not_srgb, "8-bit images are linear, not sRGB-encoded");
   cam->add_flag("--json", c->json, "Print a JSON summary on stdout");
   cam->add_flag("--quiet", c->quiet, "No progress line");
 

@@ -3,6 +3,7 @@
 #include "tracking/detect.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <sstream>
 
@@ -51,6 +52,7 @@ struct TagDetector::Impl {
   std::vector<detail::FamilyPtr> families;
   apriltag_detector_t* td = nullptr;
   cv::Mat grey;  // reused conversion buffer
+  cv::Mat lut;   // sRGB -> linear, 8 bits (when linear_light)
 
   ~Impl() {
     if (td) apriltag_detector_destroy(td);  // before the families it references
@@ -90,6 +92,12 @@ TagDetector::TagDetector(const DetectorOptions& options) : impl_(std::make_uniqu
   impl_->td->nthreads = options.threads;
   impl_->td->refine_edges = options.refine_edges;
   impl_->td->decode_sharpening = options.decode_sharpening;
+  impl_->lut.create(1, 256, CV_8U);
+  for (int i = 0; i < 256; ++i) {
+    const double e = i / 255.0;
+    const double l = e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);  // IEC 61966-2-1
+    impl_->lut.at<std::uint8_t>(0, i) = static_cast<std::uint8_t>(std::lround(255.0 * l));
+  }
 }
 
 TagDetector::~TagDetector() = default;
@@ -112,12 +120,16 @@ std::vector<TagDetection> TagDetector::detect(const cv::Mat& image, const std::v
     const cv::Rect roi = r & whole;
     if (roi.width < 8 || roi.height < 8) continue;  // nothing a quad fits in
     const cv::Mat view = image(roi);
-    if (image.channels() == 1) {
+    if (image.channels() == 1 && !impl_->options.linear_light) {
       impl_->run(view, roi.tl(), found);
-    } else {
-      cv::cvtColor(view, impl_->grey, cv::COLOR_BGR2GRAY);
-      impl_->run(impl_->grey, roi.tl(), found);
+      continue;
     }
+    if (image.channels() == 3)
+      cv::cvtColor(view, impl_->grey, cv::COLOR_BGR2GRAY);
+    else
+      view.copyTo(impl_->grey);
+    if (impl_->options.linear_light) cv::LUT(impl_->grey, impl_->lut, impl_->grey);
+    impl_->run(impl_->grey, roi.tl(), found);
   }
   if (rois.size() > 1) {
     // The same tag from two overlapping rectangles: keep the stronger decode.

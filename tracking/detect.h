@@ -24,6 +24,12 @@ struct DetectorOptions {
   int threads = 1;             // libapriltag worker threads per call (the tracker runs cameras in parallel)
   bool refine_edges = true;    // fit each edge to the image gradient (sub-pixel corners)
   double decode_sharpening = 0.25;
+  // 8-bit input is sRGB-encoded (the studio renderer and most video cameras): the tag is searched
+  // on the decoded, linear image (8-bit LUT). On the encoded values a black/white edge's profile is
+  // asymmetric and libapriltag's edges sit ~0.2 px inside the black border: a 40 px tag looks 1 %
+  // small, which is 1 % of the distance for a camera tracked from one plane of studio tags
+  // (calib's DetectOptions::linear_light, same reason). Set false for linear cameras.
+  bool linear_light = true;
   int max_hamming = 1;         // bit errors accepted when decoding (the family table holds up to 2)
   float min_decision_margin = 20.0f;  // reject weaker decodes (false positives in noise)
   void validate() const;       // throws Error naming the field

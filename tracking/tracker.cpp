@@ -83,8 +83,12 @@ struct PropTracker::Impl {
         }
       if (n == 0) continue;
       const double m = options.roi_margin_px + options.roi_margin_fraction * std::max(u1 - u0, v1 - v0);
-      const cv::Rect r(cv::Point(static_cast<int>(std::floor(u0 - m)), static_cast<int>(std::floor(v0 - m))),
-                       cv::Point(static_cast<int>(std::ceil(u1 + m)) + 1, static_cast<int>(std::ceil(v1 + m)) + 1));
+      // The origin on a multiple of 4 px: libapriltag thresholds in 4 x 4 tiles counted from the
+      // searched image's origin, so the ROI then sees the full frame's tiles (same tags found).
+      // The far edges too where the image allows (a partial last tile is thresholded differently).
+      const auto down4 = [](double x) { return static_cast<int>(std::floor(x / 4.0)) * 4; };
+      const auto up4 = [](double x) { return static_cast<int>(std::ceil(x / 4.0)) * 4; };
+      const cv::Rect r(cv::Point(down4(u0 - m), down4(v0 - m)), cv::Point(up4(u1 + m + 1), up4(v1 + m + 1)));
       const cv::Rect clipped = r & cv::Rect(0, 0, rc.camera.width, rc.camera.height);
       if (clipped.area() > 0) rois.push_back(clipped);
     }

@@ -1,6 +1,5 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages previz needs (only those missing; slurm-wlm, munge and chromium
-# are for the batch tests: a loopback Slurm cluster and the summary page in headless Chromium), then configures and builds
+# Installs the Debian 12 packages previz needs (only those missing), then configures and builds
 # previz into build/ (Ninja + ccache when present). Safe to run again: it only does what is left.
 #   PREVIZ_BUILD_DIR  build folder (default: build)
 #   PREVIZ_JOBS       parallel build jobs (default: number of cores)
@@ -14,7 +13,7 @@ packages=(
   libeigen3-dev libceres-dev libopencv-dev libopencv-contrib-dev libopenexr-dev
   nlohmann-json3-dev libcli11-dev libapriltag-dev libpcl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  slurm-wlm munge chromium
+  slurm-wlm munge chromium   # batch tests: a loopback Slurm cluster, the summary page in Chromium
 )
 
 missing=()

@@ -27,7 +27,7 @@ plan=(--takes "$tmp/take_a" "$tmp/take_b" --rig "$tmp/take_a/truth/rig.json" --q
 
 # The local backend's result.
 "$bin" batch plan "${plan[@]}" --out "$tmp/local" >/dev/null 2>&1 || fail "plan local"
-"$bin" batch submit "$tmp/local" --local --jobs 2 --quiet >/dev/null 2>&1 && ok "local backend ran 8 shards" || fail "local submit"
+"$bin" batch submit "$tmp/local" --local --jobs 1 --quiet >/dev/null 2>&1 && ok "local backend ran 8 shards (1 job, OpenMP on every core; Slurm tasks get 1 core each)" || fail "local submit"
 "$bin" batch collect "$tmp/local" --y-up --out "$tmp/local_out" >/dev/null 2>&1 && ok "local collect" || fail "local collect"
 
 slurm_cluster_start "$tmp/cluster" || { fail "start the Slurm cluster"; finish; exit 1; }

@@ -51,6 +51,7 @@ struct FrameLoop::Impl {
   std::unique_ptr<carving::Carver> carver;
   std::unique_ptr<composite::Compositor> compositor;
   std::vector<std::pair<std::string, StageFn>> stages;
+  composite::CompositeResult result;  // images reused frame after frame
 
   int threads() const { return options.threads > 0 ? options.threads : omp_get_max_threads(); }
 
@@ -108,7 +109,8 @@ struct FrameLoop::Impl {
     in.actor_depth = s.main_depth;
     in.cg_color = s.cg.color;
     in.cg_depth = s.cg.depth;
-    s.composite = compositor->composite(in, options.debug_layers, "frame " + std::to_string(s.frame));
+    compositor->composite(in, result, options.debug_layers, "frame " + std::to_string(s.frame));
+    s.composite = result;
   }
 };
 

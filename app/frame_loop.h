@@ -59,6 +59,7 @@ struct FrameState {
   cv::Mat foreground;                        // despilled main plate
   carving::VisualHull hull;
   cv::Mat main_depth;                        // CV_32FC1, +inf outside the hull / key
+  // The loop's composite buffers, shared: overwritten by the next run() (clone to keep).
   composite::CompositeResult composite;
 };
 

@@ -171,6 +171,13 @@ cv::Mat Compositor::distortCg(const cv::Mat& cg_image, bool nearest, const cv::S
 
 CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_layers,
                                       const std::string& source) const {
+  CompositeResult r;
+  composite(in, r, debug_layers, source);
+  return r;
+}
+
+void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool debug_layers,
+                           const std::string& source) const {
   const Clock::time_point start = Clock::now();
   const cv::Size lens_size(lens_.width, lens_.height), cg_size(cg_.width, cg_.height);
   checkInput(in.foreground, CV_8UC3, lens_size, "foreground", source);
@@ -179,7 +186,7 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
   checkInput(in.cg_color, CV_32FC3, cg_size, "cg_color", source);
   checkInput(in.cg_depth, CV_32FC1, cg_size, "cg_depth", source);
 
-  CompositeResult r;
+  r.stats = CompositeStats{};
   const int W = lens_.width, H = lens_.height, CW = cg_.width, CH = cg_.height;
   r.bgr.create(H, W, CV_8UC3);
   if (debug_layers) {
@@ -188,6 +195,12 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
     r.layer_cg_depth.create(H, W, CV_32FC1);
     r.layer_front.create(H, W, CV_8UC1);
     r.linear.create(H, W, CV_32FC3);
+  } else {
+    r.layer_alpha.release();
+    r.layer_actor_depth.release();
+    r.layer_cg_depth.release();
+    r.layer_front.release();
+    r.linear.release();
   }
   const std::array<float, 256>& dec = decodeTable();
   const std::uint8_t* enc = encodeTable().data();
@@ -315,7 +328,6 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
   r.stats.edge_filled_px = filled;
   r.stats.fallback_px = fallback;
   r.stats.ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-  return r;
 }
 
 cv::Mat depthPreview(const cv::Mat& depth_m, double near_m, double far_m) {

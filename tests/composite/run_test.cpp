@@ -27,6 +27,34 @@ TEST(RunTrueRig, CompositeMatchesTruthOverTheActorAndKeepsDepthOrder) {
   EXPECT_LE(m.wrongFraction(), 0.005);
 }
 
+// The plug-in point of later stages (prop tracking goes after "depth"): an inserted stage runs
+// in its place, sees the stages before it done and the ones after it not yet, and is timed.
+TEST(FrameLoop, InsertedStageRunsInItsPlaceAndIsTimed) {
+  const fs::path& take = studioTake();
+  carving::TakeSource src;
+  src.take_dir = take;
+  src.rig_path = take / "truth" / "rig.json";
+  src.main_poses = take / "truth" / "main_poses.jsonl";
+  const carving::Take t(src);
+  app::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), app::FrameLoopOptions{});
+  bool saw_depth = false, saw_composite = true;
+  loop.insertStage("depth", "probe", [&](app::FrameState& s) {
+    saw_depth = !s.main_depth.empty();
+    saw_composite = !s.composite.bgr.empty();
+  });
+  EXPECT_EQ(loop.stages(), (std::vector<std::string>{"key", "carve", "depth", "probe", "composite"}));
+  EXPECT_THROW(loop.insertStage("nosuch", "x", [](app::FrameState&) {}), Error);
+  const app::TakeReader reader(t, loop, app::TakeInputOptions{});
+  app::FrameState s;
+  reader.read(1, s);
+  const std::vector<app::StageTime> times = loop.run(s);
+  ASSERT_EQ(times.size(), 5u);
+  EXPECT_EQ(times[3].stage, "probe");
+  EXPECT_TRUE(saw_depth);
+  EXPECT_FALSE(saw_composite);
+  EXPECT_FALSE(s.composite.bgr.empty());
+}
+
 // `previz run --live`: every camera of the take as a video file written by cv::VideoWriter
 // (MJPG), read back through VideoCapture in lock step. Unpaced, every frame is processed and the
 // composite matches the truth as from the PNG plates; paced at a camera rate far above what the

@@ -23,7 +23,7 @@
 namespace previz::tracking {
 
 struct TrackerOptions {
-  DetectorOptions detector;                           // every camera...
+  DetectorOptions detector;                           // every camera (families: props.json's)...
   std::map<std::string, DetectorOptions> per_camera;  // ...unless overridden by camera name
   SolveOptions solve;
   FilterOptions filter;

@@ -1,6 +1,7 @@
 // previz run: the live previz frame over a take — per frame key -> carve -> main-view depth ->
-// composite (app/frame_loop.h), writing composites, depth, the main camera's poses and, on
-// request, meshes, debug layers and a video; a progress line with per-stage ms and fps.
+// track props -> composite (app/frame_loop.h), writing composites, depth, the main camera's and
+// the props' poses and, on request, meshes, debug layers and a video; a progress line with
+// per-stage ms and fps.
 // previz bench run: the same loop on frames held in memory, ms per stage, as JSON.
 #include <omp.h>
 
@@ -25,6 +26,8 @@
 #include "core/mesh.h"
 #include "core/pose.h"
 #include "datasets/synth.h"
+#include "tracking/props.h"
+#include "tracking/tracker.h"
 
 namespace previz::app {
 namespace {
@@ -56,6 +59,8 @@ struct LoopArgs {
   double band_m = 0.04;
   double cg_gain = 1.0;
   int threads = 0;
+  std::string props;
+  bool no_props = false;
 };
 
 void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
@@ -77,14 +82,51 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--cg-gain", a.cg_gain, "Linear gain on the CG colour (match the plate's exposure)")
       ->capture_default_str();
   cmd->add_option("--threads", a.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+  cmd->add_option("--props", a.props,
+                  "props.json of the tagged props to track (stage \"props\"; default: the take's props.json when it "
+                  "has a prop that is not fixed to the studio)");
+  cmd->add_flag("--no-props", a.no_props, "Do not track props");
 }
 
 struct Loaded {
   std::unique_ptr<carving::Take> take;
   std::unique_ptr<FrameLoop> loop;
   std::unique_ptr<TakeReader> reader;
-  std::string lens_note;
+  std::unique_ptr<PropStage> props;  // null: no prop tracking
+  std::string lens_note, props_note;
 };
+
+// The props to track: --props, else the take's props.json when it has a carried prop.
+std::optional<tracking::PropSet> runProps(const fs::path& take_dir, const LoopArgs& a, std::string& note) {
+  if (a.no_props) {
+    if (!a.props.empty()) throw Error("--props and --no-props exclude each other", flag("--no-props"));
+    return std::nullopt;
+  }
+  const fs::path path = a.props.empty() ? take_dir / "props.json" : fs::path(a.props);
+  if (a.props.empty() && !fs::exists(path)) return std::nullopt;
+  tracking::PropSet set = tracking::readProps(path);
+  int carried = 0;
+  for (const tracking::PropDef& p : set.props) carried += p.T_world_prop ? 0 : 1;
+  if (carried == 0) {
+    if (!a.props.empty()) {
+      ErrorContext c;
+      c.file = path.string();
+      throw Error("no prop to track (every prop is fixed to the studio)", c);
+    }
+    return std::nullopt;
+  }
+  note = std::to_string(carried) + " props of " + path.string();
+  return set;
+}
+
+double takeFps(const fs::path& take_dir) {
+  const fs::path tj = take_dir / "take.json";
+  if (fs::exists(tj)) {
+    const nlohmann::json j = readJsonFile(tj);
+    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
+  }
+  return 24.0;
+}
 
 Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   Loaded l;
@@ -129,6 +171,13 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
                   std::to_string(a.zoom) + (e.clamped ? " (clamped to the table)" : "");
   }
   l.loop = std::make_unique<FrameLoop>(rig, cg, o);
+  if (std::optional<tracking::PropSet> props = runProps(take_dir, a, l.props_note)) {
+    PropStageOptions po;
+    po.fps = takeFps(take_dir);
+    po.tracker.threads = a.threads;
+    l.props = std::make_unique<PropStage>(*l.loop, rig, std::move(*props), po);
+    l.props->addTo(*l.loop);
+  }
   l.reader = std::make_unique<TakeReader>(*l.take, *l.loop, io);
   return l;
 }
@@ -183,12 +232,13 @@ int runRun(const RunArgs& a) {
     std::cerr << "run: " << (live ? std::string("live") : std::to_string(frames.size()) + " frames") << ", "
               << l.loop->carveCameras().size()
               << " witnesses carve, main '" << main << "'" << (l.lens_note.empty() ? "" : ", " + l.lens_note)
+              << (l.props_note.empty() ? ", no props" : ", " + l.props_note)
               << "; stages:";
     for (const std::string& s : l.loop->stages()) std::cerr << " " << s;
     std::cerr << " -> " << out << "\n";
   }
 
-  std::string poses, report;
+  std::string poses, report, prop_lines;
   std::map<std::string, double> stage_sum;
   std::vector<std::string> stage_order;
   double total_ms = 0;
@@ -235,6 +285,7 @@ int runRun(const RunArgs& a) {
       dropped.push_back({{"camera", cam}, {"frame", f}, {"reason", s.dropped[i]}});
       std::cerr << "run: frame " << f << ": camera '" << cam << "' dropped: " << s.dropped[i] << "\n";
     }
+    if (s.props) prop_lines += tracking::trackFrameToJson(*s.props).dump() + "\n";
     poses += nlohmann::json{{"frame", f}, {"camera", main}, {"T_world_cam", poseToJson(s.main.T_world_cam)}}.dump() + "\n";
     const composite::CompositeStats& cs = s.composite.stats;
     report += nlohmann::json{{"frame", f},
@@ -260,6 +311,7 @@ int runRun(const RunArgs& a) {
   writer.close();
   writeFileAtomic(out / "poses.jsonl", poses);
   writeFileAtomic(out / "run.jsonl", report);
+  if (l.props) writeFileAtomic(out / "props.jsonl", prop_lines);
   nlohmann::json mean = nlohmann::json::object();
   for (const std::string& s : stage_order) mean[s] = stage_sum[s] / frames.size();
   const double fps = total_ms > 0 ? 1000.0 * frames.size() / total_ms : 0.0;
@@ -276,6 +328,7 @@ int runRun(const RunArgs& a) {
                                 {"mean_ms", mean},
                                 {"fps", fps},
                                 {"dropped", dropped},
+                                {"props", l.props ? nlohmann::json((out / "props.jsonl").string()) : nlohmann::json()},
                                 {"live", live ? nlohmann::json{{"fps", live->fps()},
                                                                {"delivered", live->delivered()},
                                                                {"dropped_frames", live->dropped()}}
@@ -336,6 +389,7 @@ int runBench(const BenchArgs& a) {
   { FrameState s = inputs[0]; l.loop->run(s); }
   std::map<std::string, std::vector<double>> ms, cpu;
   std::vector<double> total, total_cpu;
+  int prop_frames = 0, prop_full_frames = 0;
   std::vector<std::string> order = l.loop->stages();
   for (int r = 0; r < a.repeats; ++r) {
     for (const FrameState& in : inputs) {
@@ -347,12 +401,16 @@ int runBench(const BenchArgs& a) {
         sum += t.ms;
         sum_cpu += t.cpu_ms;
       }
+      if (s.props) {
+        ++prop_frames;
+        prop_full_frames += s.props->full_frame ? 1 : 0;
+      }
       total.push_back(sum);
       total_cpu.push_back(sum_cpu);
     }
   }
   const double budget_ms = 20.0;
-  const std::map<std::string, double> stage_budget = {{"key", 5}, {"carve", 5}, {"depth", 5}, {"composite", 2}};
+  const std::map<std::string, double> stage_budget = {{"key", 5}, {"carve", 5}, {"depth", 5}, {"props", 3}, {"composite", 2}};
   nlohmann::json stages = nlohmann::json::array();
   std::string largest;
   double largest_ms = -1;
@@ -386,6 +444,10 @@ int runBench(const BenchArgs& a) {
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()}};
+  // The props stage searches whole frames when the frames are further apart than its filter
+  // bridges (the default take: 2 s) and predicted regions at camera rate.
+  if (l.props)
+    j["props_full_frame_fraction"] = prop_frames ? double(prop_full_frames) / prop_frames : 0.0;
   std::cout << j.dump() << "\n";
   return 0;
 }
@@ -395,7 +457,7 @@ int runBench(const BenchArgs& a) {
 Runner addRunCommand(CLI::App& app) {
   auto a = std::make_shared<RunArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "run", "The live previz frame over a take: key -> carve -> main-view depth -> composite "
+      "run", "The live previz frame over a take: key -> carve -> main-view depth -> track props -> composite "
              "(docs/formats.md, \"Run output\")");
   cmd->add_option("--take", a->take, "Take folder (cams/<cam>/%06d.png, cg/)")->required();
   cmd->add_option("--out", a->out, "Output folder")->required();

@@ -48,8 +48,8 @@ std::vector<double> parseNumbers(const std::string& text, size_t n, const std::s
 }
 
 struct TrackArgs {
-  std::string take, rig, props, out, udp, main_poses, cameras, truth, frames;
-  bool freed = false, otio = false;
+  std::string take, rig, props, out, udp, main_poses, cameras, truth, frames, shard = "0/1";
+  bool freed = false, otio = false, frame_files = false;
   double fps = 0;
   float decimate = 1.0f, sigma = 0.8f;
   int detector_threads = 1, threads = 0, full_every = 30;
@@ -155,6 +155,19 @@ int runTrack(const TrackArgs& a) {
   o.udp = a.udp;
   o.protocol = a.otio ? tracking::StreamProtocol::kOpenTrackIo : tracking::StreamProtocol::kFreeD;
   parseFrames(a.frames, o);
+  {
+    const auto slash = a.shard.find('/');
+    try {
+      if (slash == std::string::npos) throw std::invalid_argument(a.shard);
+      size_t ui = 0, un = 0;
+      o.shard_index = std::stoi(a.shard.substr(0, slash), &ui);
+      o.shard_count = std::stoi(a.shard.substr(slash + 1), &un);
+      if (ui != slash || un != a.shard.size() - slash - 1) throw std::invalid_argument(a.shard);
+    } catch (const std::exception&) {
+      throw Error("expected i/n with 0 <= i < n, e.g. 0/4 (got '" + a.shard + "')", flag("--shard"));
+    }
+  }
+  o.frame_files = a.frame_files;
   o.tracker.detector.decimate = a.decimate;
   o.tracker.detector.sigma = a.sigma;
   o.tracker.detector.threads = a.detector_threads;
@@ -196,6 +209,8 @@ int runTrack(const TrackArgs& a) {
                       {"out", a.out},
                       {"poses", s.poses.string()},
                       {"frames", s.frames},
+                      {"frames_selected", s.selected},
+                      {"frames_kept", s.kept},
                       {"cameras", s.cameras},
                       {"props", props},
                       {"unknown_tags", s.unknown_tags},
@@ -207,7 +222,8 @@ int runTrack(const TrackArgs& a) {
                       {"protocol", a.udp.empty() ? nlohmann::json(nullptr) : nlohmann::json(a.otio ? "otio" : "freed")},
                       {"packets_sent", s.packets_sent},
                       {"packets_failed", s.packets_failed}};
-  writeJsonAtomic(std::filesystem::path(a.out) / "track.json", j);
+  // Frame files: shards share the folder, so the summary is only printed (--json).
+  if (!a.frame_files) writeJsonAtomic(std::filesystem::path(a.out) / "track.json", j);
   if (a.json) std::cout << j.dump() << "\n";
   return 0;
 }
@@ -341,6 +357,9 @@ Runner addTrackCommand(CLI::App& app) {
   cmd->add_option("--truth", a->truth, "truth/props.jsonl of a synthetic take: report errors");
   cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
   cmd->add_option("--fps", a->fps, "Frame rate (default: take.json's, else 24)");
+  cmd->add_option("--shard", a->shard, "Shard i/n: every n-th selected frame from the i-th")->capture_default_str();
+  cmd->add_flag("--frame-files", a->frame_files,
+                "Track every frame on its own into OUT/frames/%06d.json (kept when already there); no poses.jsonl");
   cmd->add_option("--decimate", a->decimate, "libapriltag quad_decimate")->capture_default_str();
   cmd->add_option("--sigma", a->sigma, "libapriltag quad_sigma (blur before the quad search)")->capture_default_str();
   cmd->add_option("--detector-threads", a->detector_threads, "libapriltag threads per camera")->capture_default_str();

@@ -203,6 +203,38 @@ std::vector<StageTime> FrameLoop::run(FrameState& state) {
   return times;
 }
 
+void PropStageOptions::validate() const {
+  tracker.validate();
+  if (!(fps > 0) || !std::isfinite(fps)) throw Error("run: props fps must be > 0", fieldContext("fps"));
+}
+
+PropStage::PropStage(const FrameLoop& loop, const Rig& rig, tracking::PropSet props, const PropStageOptions& options)
+    : options_(options) {
+  options_.validate();
+  std::vector<RigCamera> cams;
+  for (const std::string& name : loop.carveCameras()) cams.push_back(rig.at(name));
+  cams.push_back(rig.at(loop.mainCamera()));
+  main_index_ = static_cast<int>(cams.size()) - 1;
+  tracker_ = std::make_unique<tracking::PropTracker>(std::move(cams), std::move(props), options_.tracker);
+}
+
+PropStage::~PropStage() = default;
+
+void PropStage::operator()(FrameState& s) {
+  const double t = s.frame / options_.fps;
+  if (any_ && (t <= last_time_s_ || t - last_time_s_ > options_.tracker.filter.max_gap_s)) tracker_->reset();
+  any_ = true;
+  last_time_s_ = t;
+  tracker_->setCameraPose(main_index_, s.main.T_world_cam);
+  std::vector<cv::Mat> images = s.witness_plates;
+  images.push_back(s.main_plate);
+  s.props = tracker_->track(s.frame, t, images);
+}
+
+void PropStage::addTo(FrameLoop& loop) {
+  loop.insertStage("depth", "props", [this](FrameState& s) { (*this)(s); });
+}
+
 TakeReader::TakeReader(const carving::Take& take, const FrameLoop& loop, const TakeInputOptions& options)
     : take_(take), carve_names_(loop.carveCameras()), main_name_(loop.mainCamera()),
       cg_(loop.compositor().cg()), options_(options) {

@@ -5,9 +5,12 @@
 //             parallel over cameras, one Keyer per camera kept across frames
 //   carve     visual hull from the witness silhouettes (carving/hull.h)
 //   depth     the hull's depth for the main camera at this frame's pose, inside its key
+//   props     (optional, PropStage below) AprilTag-tagged props from the carving cameras' and
+//             the main camera's plates (tracking/tracker.h), inserted after "depth"
 //   composite keyed main plate over the CG frame, depth-aware (composite/compositor.h)
 // One frame is a function of (rig, camera frames, CG frame) plus the keyers' per-camera screen
-// models (ARCHITECTURE.md): the loop holds no other state between frames. Reading inputs and
+// models (ARCHITECTURE.md) and, with the props stage, the prop tracker's filters and ROIs
+// (PropStage): the loop holds no other state between frames. Reading inputs and
 // writing outputs are the caller's (files, VideoCapture); they are timed by the caller.
 // A stage can be inserted after any other (insertStage), e.g. prop tracking after "depth"; a
 // stage reads and writes FrameState.
@@ -28,6 +31,8 @@
 #include "composite/compositor.h"
 #include "composite/output.h"
 #include "core/rig.h"
+#include "tracking/props.h"
+#include "tracking/tracker.h"
 
 namespace previz::app {
 
@@ -61,6 +66,7 @@ struct FrameState {
   cv::Mat main_depth;                        // CV_32FC1, +inf outside the hull / key
   // The loop's composite buffers, shared: overwritten by the next run() (clone to keep).
   composite::CompositeResult composite;
+  std::optional<tracking::TrackFrame> props;  // the props stage's frame (docs/formats.md, "Tracking")
 };
 
 struct StageTime {
@@ -97,6 +103,39 @@ class FrameLoop {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+// The "props" stage: one PropTracker for the whole run over the carving cameras and the main
+// camera (in that order), fed each frame's plates (a dropped witness without a plate is reported
+// "no image"); before each frame the main camera's pose is set from FrameState::main (the moving
+// camera). Time is frame / fps. A frame earlier than the previous one, or more than the filter's
+// max_gap_s after it, starts the tracker over (every track forgotten, full-frame search): the
+// filter no longer bridges the gap, so its predicted ROIs would be guesses.
+struct PropStageOptions {
+  tracking::TrackerOptions tracker;
+  double fps = 24;
+  void validate() const;  // throws Error naming the field
+};
+
+class PropStage {
+ public:
+  // rig: the loop's rig (the main camera's lens as the loop uses it). Throws Error naming the
+  // camera or the props' field.
+  PropStage(const FrameLoop& loop, const Rig& rig, tracking::PropSet props, const PropStageOptions& options);
+  ~PropStage();
+  PropStage(const PropStage&) = delete;
+  PropStage& operator=(const PropStage&) = delete;
+  void operator()(FrameState& s);
+  // Inserts this stage into the loop after "depth" as "props" (the stage must outlive the loop's runs).
+  void addTo(FrameLoop& loop);
+  const tracking::PropTracker& tracker() const { return *tracker_; }
+
+ private:
+  std::unique_ptr<tracking::PropTracker> tracker_;
+  PropStageOptions options_;
+  int main_index_ = 0;
+  bool any_ = false;
+  double last_time_s_ = 0;
 };
 
 // Inputs of one frame from a take folder (carving/take.h: plates, rig, main poses) and its CG

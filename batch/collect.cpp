@@ -306,7 +306,7 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
 
     // Prop animation, when a track stage left its output: one file for the take, or one line
     // per frame in track/frames/%06d.json (what a sharded stage writes without racing).
-    const fs::path track = m.job_dir / take.work / "track" / "props.jsonl";
+    const fs::path track = m.job_dir / take.work / "track" / "poses.jsonl";
     std::vector<fs::path> track_files;
     std::error_code ec;
     if (fs::is_regular_file(track, ec)) {

@@ -42,7 +42,7 @@ std::vector<std::pair<int, Pose>> mainCameraPoses(const Manifest& manifest, cons
 std::string sequenceName(const std::string& stem, int frame, const std::string& ext);
 
 // Prop poses from track output JSON lines {"frame", "props": [{"id", "name", "T_world_prop":
-// {"R", "t"}, "state"}]}: a take's work/<take>/track/props.jsonl, or else its per-frame
+// {"R", "t"}, "state"}]}: a take's work/<take>/track/poses.jsonl, or else its per-frame
 // work/<take>/track/frames/%06d.json, written by a "track" stage. A prop without "name" is
 // "prop<id>"; one without T_world_prop (not seen) is left out.
 struct PropSample {

@@ -110,6 +110,25 @@ StagePlan carveStage(const Manifest& m, const TakePlan& take) {
   return s;
 }
 
+// `previz track` for one shard of a take (tracking/run.h; docs/formats.md, "Tracking"): frame
+// files, every frame tracked on its own so its poses do not depend on the sharding (the same
+// frame gives the same bytes from any shard, backend or resume), a frame already written kept.
+// One file per frame, written atomically: it is the marker.
+StagePlan trackStage(const Manifest& m, const TakePlan& take) {
+  StagePlan s;
+  s.name = "track";
+  const std::string out = (take.work / "track").string();
+  s.command = {"{previz}", "track", "--take", take.dir.string(), "--rig", m.rig.string(),
+               "--props", m.props.string(), "--out", "{job}/" + out, "--shard", "{shard_index}/{shard_count}",
+               "--frame-files", "--threads", std::to_string(m.settings["threads"].get<int>()), "--quiet", "--json"};
+  if (!take.main_poses.empty()) {
+    s.command.push_back("--main-poses");
+    s.command.push_back(take.main_poses.string());
+  }
+  s.outputs.push_back(out + "/frames/{frame}.json");
+  return s;
+}
+
 }  // namespace
 
 std::string frameStem(int frame) {
@@ -225,7 +244,7 @@ Manifest planBatch(const PlanOptions& options) {
                 {"frames_per_shard", per_shard},
                 {"shards_per_take", options.shards_per_take},
                 {"threads", options.threads},
-                {"stages", {"carve"}}};
+                {"stages", m.props.empty() ? nlohmann::json{"carve"} : nlohmann::json{"carve", "track"}}};
 
   const Rig rig = readRig(m.rig);
   std::vector<fs::path> input_files = {m.rig};
@@ -262,7 +281,10 @@ Manifest planBatch(const PlanOptions& options) {
     if (fs::is_regular_file(t.dir / "take.json", ec)) input_files.push_back(t.dir / "take.json");
     m.takes.push_back(std::move(t));
   }
-  for (TakePlan& t : m.takes) t.stages.push_back(carveStage(m, t));
+  for (TakePlan& t : m.takes) {
+    t.stages.push_back(carveStage(m, t));
+    if (!m.props.empty()) t.stages.push_back(trackStage(m, t));
+  }
 
   for (const fs::path& f : input_files) m.inputs.push_back(checksum(f));
   m.inputs_hash = hashText(inputsJson(m.inputs).dump());

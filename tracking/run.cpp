@@ -96,6 +96,14 @@ void TrackRunOptions::validate() const {
     c.field = "--frames";
     throw Error("track: frames must be A:B with 0 <= A < B", c);
   }
+  if (shard_count < 1 || shard_index < 0 || shard_index >= shard_count) {
+    c.field = "--shard";
+    throw Error("track: shard must be i/n with 0 <= i < n", c);
+  }
+  if (frame_files && !udp.empty()) {
+    c.field = "--udp";
+    throw Error("track: frame files are not streamed (frames may be kept from an earlier run)", c);
+  }
   if (fps < 0) {
     c.field = "--fps";
     throw Error("track: fps must be > 0", c);
@@ -167,12 +175,16 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
 
   TrackRunSummary s;
   for (const RigCamera& rc : cams) s.cameras.push_back(rc.camera.name);
-  const std::vector<int> frames = selectFrames(takeFrames(in.take, s.cameras), o);
-  if (frames.empty()) {
+  const std::vector<int> in_range = selectFrames(takeFrames(in.take, s.cameras), o);
+  if (in_range.empty()) {
     ErrorContext c;
     c.file = (in.take / "cams").string();
     throw Error("track: no frames (cams/<camera>/%06d.png) for the selected cameras and frames", c);
   }
+  std::vector<int> frames;
+  for (size_t i = 0; i < in_range.size(); ++i)
+    if (static_cast<int>(i % static_cast<size_t>(o.shard_count)) == o.shard_index) frames.push_back(in_range[i]);
+  s.selected = frames;
   const double fps = takeFps(in.take, o.fps);
   PropTracker tracker(cams, props, o.tracker);
   std::unique_ptr<PoseStreamer> streamer;
@@ -189,6 +201,22 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
   const int n_cams = static_cast<int>(cams.size());
   for (size_t i = 0; i < frames.size(); ++i) {
     const int f = frames[i];
+    fs::path frame_file;
+    if (o.frame_files) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "%06d.json", f);
+      frame_file = o.out / "frames" / name;
+      std::error_code ec;
+      if (fs::is_regular_file(frame_file, ec)) {
+        const nlohmann::json kept = nlohmann::json::parse(readTextFile(frame_file), nullptr, false);
+        if (!kept.is_discarded() && kept.is_object() && kept.value("frame", -1) == f && kept.contains("props")) {
+          ++s.kept;  // not in s.frames: the summary covers the frames tracked by this run
+          if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
+          continue;
+        }
+      }
+      tracker.reset();
+    }
     std::vector<cv::Mat> images(cams.size());
     std::vector<std::string> failures(cams.size());
 #pragma omp parallel for schedule(dynamic)
@@ -213,7 +241,8 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     const TrackFrame r = tracker.track(f, f / fps, images);
     s.track_ms += msSince(t_track);
     if (streamer) streamer->send(r);
-    lines += trackFrameToJson(r).dump() + "\n";
+    if (o.frame_files) writeFileAtomic(frame_file, trackFrameToJson(r).dump() + "\n");
+    else lines += trackFrameToJson(r).dump() + "\n";
     ++s.frames;
     s.unknown_tags += r.unknown_tags;
     s.full_frames += r.full_frame ? 1 : 0;
@@ -257,8 +286,12 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     s.packets_sent = streamer->sent();
     s.packets_failed = streamer->failed();
   }
-  s.poses = o.out / "poses.jsonl";
-  writeFileAtomic(s.poses, lines);
+  if (o.frame_files) {
+    s.poses = o.out / "frames";
+  } else {
+    s.poses = o.out / "poses.jsonl";
+    writeFileAtomic(s.poses, lines);
+  }
   s.ms = msSince(t0);
   return s;
 }

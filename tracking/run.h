@@ -33,6 +33,15 @@ struct TrackRunOptions {
   std::filesystem::path out;         // poses.jsonl and track.json are written here
   int first_frame = 0, end_frame = -1;  // [first, end); end -1 = every frame found
   double fps = 0;                    // 0 = take.json's "fps", else 24
+  // Shard i of n (`previz batch`): the i-th of every n frames selected by the range (round
+  // robin, as `previz carve --shard`).
+  int shard_index = 0, shard_count = 1;
+  // Frame files (`--frame-files`, what a batch shard runs): every frame is tracked on its own
+  // (the tracker starts over: full-frame search, no filter history, so a frame's poses depend on
+  // nothing but its images — not on the sharding) and written as out/frames/%06d.json, its
+  // poses.jsonl line, atomically; a frame whose file is already there and reads back is kept,
+  // not tracked again (resume). poses.jsonl is not written (shards share out/).
+  bool frame_files = false;
   std::string udp;                   // HOST:PORT; empty = no streaming
   StreamProtocol protocol = StreamProtocol::kFreeD;
   void validate() const;             // throws Error naming the field
@@ -59,7 +68,9 @@ struct TrackRunSummary {
   double ms = 0, track_ms = 0;       // whole run / inside PropTracker::track
   int packets_sent = 0, packets_failed = 0;
   std::vector<std::string> cameras;
-  std::filesystem::path poses;       // the JSON lines file
+  std::filesystem::path poses;       // the JSON lines file (frame files: the frames/ folder)
+  std::vector<int> selected;         // frames of the range and the shard
+  int kept = 0;                      // frame files already there, not tracked again
 };
 
 // The frames of a take: every %06d.png under cams/<camera>/ for the given cameras, ascending.

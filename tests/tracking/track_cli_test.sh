@@ -52,6 +52,8 @@ expect_fail "track rejects a props file with a duplicate id" "dup.json.*duplicat
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$tmp/dup.json" --out "$tmp/o3" --quiet
 expect_fail "bad --udp names the flag" "--udp" \
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o4" --udp localhost:1 --quiet
+expect_fail "bad --shard names the flag" "--shard" \
+  "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o4" --shard 2/2 --quiet
 expect_fail "--freed needs --udp" "--udp" \
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o5" --freed --quiet
 expect_fail "missing --props" "--props" "$bin" track --take "$T" --rig "$T/truth/rig.json" --out "$tmp/o6" --quiet

@@ -1,9 +1,9 @@
 // Quadtree ArUco board (core/board.h): OpenCV's ArUco detector finds the markers; the board's
 // ids are kept; a marker whose corners disagree with a homography fitted (RANSAC) to the
-// markers around it is dropped (a misread code, a foreign marker with a board id); every
-// corner of the others is refined by cornerSubPix and then by the model fit (an L-shaped black
-// corner on white paper, the code bits unknown), with windows that stay inside the marker's
-// black border bit and clear of the neighbouring markers.
+// markers around it is dropped (a misread code, a foreign marker with a board id, a print whose
+// ids start elsewhere); every corner of the others is refined by cornerSubPix, with a window
+// that stays inside the marker's black border bit and clear of the neighbouring markers, and
+// then from the marker's two edges through it (EdgeCorner below; DetectOptions::model_fit).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -175,14 +175,15 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
   // Layout check: each marker against a RANSAC homography of the markers whose centres lie
   // within 1.5 outer cells of its own (small enough for the lens to be a homography there to a
   // pixel or two). A marker read with another marker's id is off by at least a whole (sub-)
-  // cell, 1.25 marker edges; a quarter edge (at least 2 px) separates the two. Markers with
-  // fewer than two neighbours to check against are kept.
+  // cell, 1.25 marker edges; a quarter edge (at least 2 px) separates the two. A marker with
+  // fewer than two neighbours to check against is dropped: a print whose ids start elsewhere
+  // than the board says leaves such lone markers with wrong ids (tests/calib/detect_test).
   const double s = board.square_m;
   auto centre = [](const std::array<Eigen::Vector2d, 4>& c) {
     return Eigen::Vector2d(0.25 * (c[0] + c[1] + c[2] + c[3]));
   };
   std::vector<bool> consistent(found.size(), true);
-  int inconsistent = 0;
+  int inconsistent = 0, unchecked = 0;
   for (size_t k = 0; k < found.size(); ++k) {
     const Eigen::Vector2d own = centre(found[k].board);
     std::vector<cv::Point2f> from, to;
@@ -195,10 +196,14 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
                         static_cast<float>(found[j].px[q].y()));
       }
     }
-    if (from.size() < 8) continue;
     const double tol = std::max(2.0, 0.25 * found[k].edge_px);
-    const cv::Mat H = cv::findHomography(from, to, cv::RANSAC, 0.5 * tol);
-    if (H.empty()) continue;
+    const cv::Mat H =
+        from.size() < 8 ? cv::Mat() : cv::findHomography(from, to, cv::RANSAC, 0.5 * tol);
+    if (H.empty()) {
+      consistent[k] = false;
+      ++unchecked;
+      continue;
+    }
     std::vector<cv::Point2f> own_board, predicted;
     for (int q = 0; q < 4; ++q)
       own_board.emplace_back(static_cast<float>(found[k].board[q].x()),
@@ -263,7 +268,7 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
   }
   std::vector<bool> ok(pts.size(), true);
   if (options.subpixel) ok = refineCorners(input, pts, windows);
-  if (options.subpixel && options.model_fit)
+  // The edge refinement (EdgeCorner above) is this board's model-based stage (options.model_fit).
   if (options.subpixel && options.model_fit) {
     const cv::Mat& lin = input.linearImage();
     for (size_t k = 0; k < pts.size(); ++k) {
@@ -281,6 +286,7 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
   if (out.points.empty())
     out.failure = std::to_string(found.size()) + " markers of this board found but none usable (" +
                   std::to_string(inconsistent) + " off the board layout, " +
+                  std::to_string(unchecked) + " without neighbours to check them, " +
                   std::to_string(too_small_window) + " too small to refine)";
 }
 

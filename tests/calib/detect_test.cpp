@@ -351,8 +351,12 @@ TEST(DetectQuadtree, FirstIdMismatchGivesNoWrongIds) {
   const Camera camera = distortedCamera();
   int wrong = 0, returned = 0;
   for (const PoseCase& p : kPoses) {
+    // The views of the test above (same render options: read from the cache).
+    synth::RenderOptions soft = sharpRender();
+    soft.blur_sigma_px = 1.0;
     const View view = render(camera, printed,
-                             boardPose(camera, printed, p.coverage, p.tilt_x, p.tilt_y, p.roll, p.target));
+                             boardPose(camera, printed, p.coverage, p.tilt_x, p.tilt_y, p.roll, p.target),
+                             soft);
     DetectOptions any;
     any.min_points = 1;  // a lone marker that passed the check would count
     const ViewObservations obs = detectBoard(view.bgr, assumed, any);

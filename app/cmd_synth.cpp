@@ -130,7 +130,7 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_option("--spp", o.samples_per_pixel, "Anti-aliasing samples per pixel (>= 4)")
       ->capture_default_str();
   cmd->add_option("--fps", o.fps, "Frame rate of the take")->capture_default_str();
-  cmd->add_option("--board", o.board, "Board for intrinsics/rig presets: chessboard|charuco|aprilgrid|circles")
+  cmd->add_option("--board", o.board, "Board for intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree")
       ->capture_default_str();
   cmd->add_option("--camera", o.camera, "Intrinsics preset: camera to film (main|witness)")
       ->capture_default_str();

@@ -82,7 +82,7 @@ const std::vector<RenderedBoard>& renderedBoards() {
     const synth::Studio studio(config);
     const Pose T_world_cam = lookAt(Eigen::Vector3d(0, -3, 1.5), Eigen::Vector3d(0, 0, 1.5));
     for (BoardType type : {BoardType::kChessboard, BoardType::kCharuco, BoardType::kAprilGrid,
-                           BoardType::kCircles}) {
+                           BoardType::kCircles, BoardType::kQuadtree}) {
       RenderedBoard r;
       r.board = synth::defaultBoard(type);
       r.T_cam_board = synth::intrinsicsBoardPose(camera, r.board, 0, 1);
@@ -140,7 +140,7 @@ void BM_Detect(benchmark::State& state) {
   const RenderedBoard& r = renderedBoards()[state.range(0)];
   for (auto _ : state) benchmark::DoNotOptimize(detectBoard(r.image, r.board));
 }
-BENCHMARK(BM_Detect)->DenseRange(0, 3)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Detect)->DenseRange(0, 4)->Unit(benchmark::kMillisecond);
 
 // ---- JSON lines ---------------------------------------------------------------------------------
 
@@ -192,7 +192,7 @@ void printJsonLines() {
     }
   }
   for (const RenderedBoard& r : renderedBoards()) {
-    // cornerSubPix alone, then with the model fit (the default; chessboard and ChArUco).
+    // cornerSubPix alone, then with the model fit (the default; chessboard, ChArUco, quadtree).
     ViewObservations found;
     for (bool fit : {false, true}) {
       DetectOptions options;

@@ -129,6 +129,23 @@ std::vector<Shape> boardShapes(const BoardSpec& spec) {
           }
       break;
     }
+    case BoardType::kQuadtree: {
+      const auto dictionary =
+          cv::aruco::getPredefinedDictionary(openCvDictionaryId(spec.dictionary));
+      const int cells = dictionary->markerSize + 2;  // one-cell black border, as OpenCV draws
+      const std::vector<QuadtreeMarker> markers = quadtreeMarkers(spec);
+      for (size_t i = 0; i < markers.size(); ++i) {
+        cv::Mat marker;
+        cv::aruco::drawMarker(dictionary, spec.first_id + static_cast<int>(i), cells, marker, 1);
+        std::vector<std::vector<bool>> bits(static_cast<size_t>(cells),
+                                            std::vector<bool>(static_cast<size_t>(cells)));
+        for (int y = 0; y < cells; ++y)
+          for (int x = 0; x < cells; ++x) bits[y][x] = marker.at<std::uint8_t>(y, x) < 128;
+        bitmapShapes(bits, o + markers[i].top_left.x(), o + markers[i].top_left.y(),
+                     markers[i].edge_m / cells, shapes);
+      }
+      break;
+    }
   }
   return shapes;
 }

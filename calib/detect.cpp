@@ -369,6 +369,9 @@ ViewObservations detectBoard(const cv::Mat& image, const BoardSpec& board,
       case BoardType::kCircles:
         detail::detectCircles(input, board, out);
         break;
+      case BoardType::kQuadtree:
+        detail::detectQuadtree(input, board, out);
+        break;
     }
   } catch (const cv::Exception& e) {
     ErrorContext context;

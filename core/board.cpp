@@ -1,5 +1,6 @@
 #include "core/board.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -77,10 +78,11 @@ BoardType boardTypeFromString(const std::string& s, const std::string& file) {
   if (s == "charuco") return BoardType::kCharuco;
   if (s == "aprilgrid") return BoardType::kAprilGrid;
   if (s == "circles") return BoardType::kCircles;
+  if (s == "quadtree") return BoardType::kQuadtree;
   ErrorContext context;
   context.file = file;
   context.field = "type";
-  throw Error("board: unknown type '" + s + "' (expected chessboard|charuco|aprilgrid|circles)",
+  throw Error("board: unknown type '" + s + "' (expected chessboard|charuco|aprilgrid|circles|quadtree)",
               context);
 }
 
@@ -92,6 +94,7 @@ const char* toString(BoardType type) {
     case BoardType::kCharuco: return "charuco";
     case BoardType::kAprilGrid: return "aprilgrid";
     case BoardType::kCircles: return "circles";
+    case BoardType::kQuadtree: return "quadtree";
   }
   return "unknown";
 }
@@ -148,7 +151,55 @@ void BoardSpec::validate() const {
                                     ")");
       break;
     }
+    case BoardType::kQuadtree: {
+      if (rows != cols)
+        fail("rows", "must equal cols for a quadtree board (got " + std::to_string(rows) + " x " +
+                         std::to_string(cols) + ")");
+      if (levels < 1 || levels > 6)
+        fail("levels", "must be in [1, 6] (got " + std::to_string(levels) + ")");
+      requirePositive("marker_m", marker_m);
+      if (marker_m >= square_m)
+        fail("marker_m", "must be smaller than square_m (" + num(square_m) + ") (got " +
+                             num(marker_m) + ")");
+      const DictionaryInfo* d = findDictionary(dictionary);
+      if (!d) fail("dictionary", "'" + dictionary + "' is not an OpenCV predefined dictionary");
+      long long markers = 0;
+      for (int r = 0; r < rows; ++r)
+        for (int c = 0; c < cols; ++c) markers += 1LL << (2 * quadtreeLevel(*this, r, c));
+      if (first_id + markers > d->size)
+        fail("first_id", "+ " + std::to_string(markers) + " markers exceeds the " +
+                             std::to_string(d->size) + " codes of " + dictionary +
+                             " (fewer levels or cols, or a _1000 dictionary)");
+      break;
+    }
   }
+}
+
+int quadtreeLevel(const BoardSpec& spec, int r, int c) {
+  const int ring = std::min(std::min(r, c), std::min(spec.cols - 1 - r, spec.cols - 1 - c));
+  return std::max(0, std::min(ring, spec.levels - 1));
+}
+
+std::vector<QuadtreeMarker> quadtreeMarkers(const BoardSpec& spec) {
+  spec.validate();
+  std::vector<QuadtreeMarker> markers;
+  if (spec.type != BoardType::kQuadtree) return markers;
+  const double s = spec.square_m;
+  for (int r = 0; r < spec.rows; ++r)
+    for (int c = 0; c < spec.cols; ++c) {
+      const int level = quadtreeLevel(spec, r, c), n = 1 << level;
+      const double cell = s / n, edge = spec.marker_m / n, inset = 0.5 * (cell - edge);
+      for (int sr = 0; sr < n; ++sr)
+        for (int sc = 0; sc < n; ++sc) {
+          QuadtreeMarker m;
+          m.top_left = Eigen::Vector2d(c * s + sc * cell + inset, r * s + sr * cell + inset);
+          m.edge_m = edge;
+          m.cell_m = cell;
+          m.level = level;
+          markers.push_back(m);
+        }
+    }
+  return markers;
 }
 
 Eigen::Vector2d BoardSpec::size_m() const {
@@ -156,6 +207,7 @@ Eigen::Vector2d BoardSpec::size_m() const {
     case BoardType::kChessboard:
     case BoardType::kCharuco:
     case BoardType::kCircles:  // circle centres at (c + 1/2, r + 1/2) pitches
+    case BoardType::kQuadtree:
       return {cols * square_m, rows * square_m};
     case BoardType::kAprilGrid:  // Kalibr: corner squares of the gap size around every tag
       return {cols * square_m + (cols + 1) * marker_m, rows * square_m + (rows + 1) * marker_m};
@@ -196,6 +248,21 @@ std::vector<BoardPoint> boardPoints(const BoardSpec& spec) {
         for (int c = 0; c < spec.cols; ++c)
           points.push_back({r * spec.cols + c, Eigen::Vector3d((c + 0.5) * s, (r + 0.5) * s, 0)});
       break;
+    case BoardType::kQuadtree: {
+      const std::vector<QuadtreeMarker> markers = quadtreeMarkers(spec);
+      points.reserve(4 * markers.size());
+      for (size_t i = 0; i < markers.size(); ++i) {
+        const Eigen::Vector2d& p = markers[i].top_left;
+        const double e = markers[i].edge_m;
+        const int id = 4 * static_cast<int>(i);
+        // OpenCV's aruco corner order: tl, tr, br, bl as printed (clockwise on the print).
+        points.push_back({id + 0, Eigen::Vector3d(p.x(), p.y(), 0)});
+        points.push_back({id + 1, Eigen::Vector3d(p.x() + e, p.y(), 0)});
+        points.push_back({id + 2, Eigen::Vector3d(p.x() + e, p.y() + e, 0)});
+        points.push_back({id + 3, Eigen::Vector3d(p.x(), p.y() + e, 0)});
+      }
+      break;
+    }
   }
   return points;
 }
@@ -212,6 +279,7 @@ nlohmann::json boardToJson(const BoardSpec& spec) {
   j["first_id"] = spec.first_id;
   j["legacy_pattern"] = spec.legacy_pattern;
   j["margin_m"] = spec.margin_m;
+  if (spec.type == BoardType::kQuadtree) j["levels"] = spec.levels;
   j["units"] = "m";
   j["frame"] = "origin at the top-left outer corner of the pattern, x along columns, y down rows";
   return j;
@@ -257,6 +325,10 @@ BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file) {
   spec.circle_radius_m = number("circle_radius_m", spec.circle_radius_m, false);
   spec.first_id = integer("first_id", spec.first_id, false);
   spec.margin_m = number("margin_m", spec.margin_m, false);
+  if (j.contains("levels") && spec.type != BoardType::kQuadtree)
+    throw fieldError("levels", "applies to quadtree boards only (this board is a " +
+                                   std::string(toString(spec.type)) + ")");
+  spec.levels = integer("levels", spec.levels, false);
   if (j.contains("dictionary")) {
     if (!j.at("dictionary").is_string()) throw fieldError("dictionary", "must be a string");
     spec.dictionary = j.at("dictionary").get<std::string>();

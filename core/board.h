@@ -12,20 +12,23 @@
 
 namespace previz {
 
-enum class BoardType { kChessboard, kCharuco, kAprilGrid, kCircles };
+enum class BoardType { kChessboard, kCharuco, kAprilGrid, kCircles, kQuadtree };
 const char* toString(BoardType type);
 
 struct BoardSpec {
   BoardType type = BoardType::kChessboard;
-  int rows = 7;                 // squares (chessboard, ChArUco), tags (AprilGrid), circles
-  int cols = 10;
-  double square_m = 0.04;       // chessboard/ChArUco square; AprilGrid tag edge; circle pitch
-  double marker_m = 0.03;       // ChArUco marker edge; AprilGrid: spacing = marker_m (gap)
+  int rows = 7;                 // squares (chessboard, ChArUco), tags (AprilGrid), circles,
+  int cols = 10;                // outer cells (quadtree: rows == cols)
+  double square_m = 0.04;       // chessboard/ChArUco square; AprilGrid tag edge; circle pitch;
+                                // quadtree outer cell
+  double marker_m = 0.03;       // ChArUco marker edge; AprilGrid: spacing = marker_m (gap);
+                                // quadtree: marker edge in an outer cell (smaller cells scale it)
   double circle_radius_m = 0.0; // concentric circles: outer radius (rings at 1, 2/3, 1/3)
   std::string dictionary = "DICT_5X5_1000";  // ChArUco (OpenCV name) or "tag36h11"
   int first_id = 0;             // first marker / tag id
   bool legacy_pattern = false;  // ChArUco: OpenCV < 4.6 layout for even row counts
   double margin_m = 0.01;       // white border around the pattern when printed
+  int levels = 3;               // quadtree only: cell sizes (1 = a plain grid of markers)
 
   void validate() const;        // throws Error naming the bad field
   // Extent of the pattern (without margin), metres: (width along x, height along y).
@@ -38,11 +41,33 @@ struct BoardSpec {
 //  AprilGrid:  4 corners per tag, id = 4 * tag_index + corner (Kalibr order: bl, br, tr, tl
 //              as seen in the print), tag_index row-major from the top-left
 //  circles:    circle centres, row-major
+//  quadtree:   4 corners per marker, id = 4 * marker_index + corner (OpenCV's aruco order: tl,
+//              tr, br, bl as seen in the print), marker_index as quadtreeMarkers() lists them
 struct BoardPoint {
   int id;
   Eigen::Vector3d p_board;
 };
 std::vector<BoardPoint> boardPoints(const BoardSpec& spec);
+
+// The quadtree ArUco board (the thesis' design): a square of cols x cols outer cells of
+// square_m (rows == cols). Cell (r, c) lies in ring k = min(r, c, cols-1-r, cols-1-c) (its
+// Chebyshev distance from the board's edge: the outer ring is k = 0, the centre has the
+// largest k) and has level L = min(k, levels - 1): it is split into 2^L x 2^L sub-cells of
+// square_m / 2^L, and every (sub-)cell holds one marker of the dictionary, of edge
+// marker_m / 2^L, centred in it. Markers thus shrink towards the centre: whatever the
+// distance, some markers have a usable size in the image, and near a close camera's centre
+// many small ones give dense points. Marker order (id = first_id + index): outer cells
+// row-major, within a cell its sub-cells row-major. Markers are drawn as OpenCV draws them (a
+// one-bit black border around the code), so a marker's corners are L-shaped black corners on
+// white paper.
+struct QuadtreeMarker {
+  Eigen::Vector2d top_left;  // board frame, metres
+  double edge_m = 0;         // marker edge
+  double cell_m = 0;         // the (sub-)cell it is centred in
+  int level = 0;
+};
+int quadtreeLevel(const BoardSpec& spec, int r, int c);
+std::vector<QuadtreeMarker> quadtreeMarkers(const BoardSpec& spec);  // index = marker order
 
 // OpenCV's PREDEFINED_DICTIONARY_NAME value for a dictionary name ("DICT_5X5_1000", ...), for
 // cv::aruco::getPredefinedDictionary. Throws Error naming the field 'dictionary' when unknown.

@@ -21,6 +21,7 @@ class BoardPrimitive final : public Primitive {
     spec.validate();
     size_ = spec.size_m();
     if (spec.type == BoardType::kCharuco) buildCharuco();
+    if (spec.type == BoardType::kQuadtree) buildQuadtree();
     if (spec.type == BoardType::kAprilGrid)
       for (int i = 0; i < spec.rows * spec.cols; ++i)
         tag_bitmaps_.push_back(detail::tag36h11Bitmap(spec.first_id + i));
@@ -111,14 +112,28 @@ class BoardPrimitive final : public Primitive {
         if (d >= 2 * R / 3) return true;
         return d < R / 3;
       }
+      case BoardType::kQuadtree: {
+        const int c = std::min(static_cast<int>(x / s), spec_.cols - 1);
+        const int r = std::min(static_cast<int>(y / s), spec_.rows - 1);
+        const int n = 1 << cell_level_[r * spec_.cols + c];
+        const double cell = s / n;
+        const int sc = std::min(static_cast<int>((x - c * s) / cell), n - 1);
+        const int sr = std::min(static_cast<int>((y - r * s) / cell), n - 1);
+        const int marker = cell_first_marker_[r * spec_.cols + c] + sr * n + sc;
+        const QuadtreeMarker& qm = quadtree_[static_cast<size_t>(marker)];
+        const double mx = x - qm.top_left.x(), my = y - qm.top_left.y();
+        if (mx < 0 || my < 0 || mx >= qm.edge_m || my >= qm.edge_m) return false;
+        const double bit = qm.edge_m / marker_cells_;
+        const int bx = std::min(static_cast<int>(mx / bit), marker_cells_ - 1);
+        const int by = std::min(static_cast<int>(my / bit), marker_cells_ - 1);
+        return marker_bits_[(marker * marker_cells_ + by) * marker_cells_ + bx] == 0;
+      }
     }
     return false;
   }
 
  private:
   void buildCharuco() {
-    const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(spec_.dictionary));
-    marker_cells_ = dictionary->markerSize + 2;  // one-cell black border, as OpenCV draws
     // OpenCV >= 4.6 layout: the top-left square is black, markers fill the white squares in
     // row-major order. The legacy (< 4.6) layout differs only for an even number of rows,
     // whose top-left square is then white.
@@ -130,8 +145,29 @@ class BoardPrimitive final : public Primitive {
         const bool black = ((r + c) % 2 == 0) != flip;
         if (!black) marker_of_square_[r * spec_.cols + c] = k++;
       }
-    marker_bits_.resize(static_cast<size_t>(k * marker_cells_ * marker_cells_));
-    for (int i = 0; i < k; ++i) {
+    storeMarkerBits(k);
+  }
+
+  // Quadtree (core/board.h): per outer cell its level and first marker, markers in core's order.
+  void buildQuadtree() {
+    quadtree_ = quadtreeMarkers(spec_);
+    int first = 0;
+    for (int r = 0; r < spec_.rows; ++r)
+      for (int c = 0; c < spec_.cols; ++c) {
+        const int level = quadtreeLevel(spec_, r, c);
+        cell_first_marker_.push_back(first);
+        cell_level_.push_back(level);
+        first += 1 << (2 * level);
+      }
+    storeMarkerBits(static_cast<int>(quadtree_.size()));
+  }
+
+  // The bitmaps of markers first_id .. first_id + count - 1, one-cell black border included.
+  void storeMarkerBits(int count) {
+    const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(spec_.dictionary));
+    marker_cells_ = dictionary->markerSize + 2;
+    marker_bits_.resize(static_cast<size_t>(count * marker_cells_ * marker_cells_));
+    for (int i = 0; i < count; ++i) {
       cv::Mat image;
       cv::aruco::drawMarker(dictionary, spec_.first_id + i, marker_cells_, image, 1);
       for (int y = 0; y < marker_cells_; ++y)
@@ -141,6 +177,8 @@ class BoardPrimitive final : public Primitive {
   }
 
   BoardSpec spec_;
+  std::vector<QuadtreeMarker> quadtree_;
+  std::vector<int> cell_level_, cell_first_marker_;
   Eigen::Matrix3d R_;
   Eigen::Vector3d t_;
   Eigen::Vector2d size_, lo_, hi_;
@@ -189,6 +227,19 @@ BoardSpec defaultBoard(BoardType type) {
       spec.cols = 8;
       spec.square_m = 0.08;
       spec.circle_radius_m = 0.03;
+      spec.margin_m = 0.02;
+      break;
+    case BoardType::kQuadtree:
+      // 5 x 5 cells of 12 cm, 3 levels: 16 markers of 96 mm on the outer ring, 32 of 48 mm
+      // on the next, 16 of 24 mm in the centre cell (64 markers, 256 points). Marker edge
+      // 0.8 of its cell: the white gap between markers (0.2 cell) and the marker's black
+      // border bit (0.8 / 6 cell for 4x4 codes) bound the refinement windows alike.
+      spec.rows = 5;
+      spec.cols = 5;
+      spec.square_m = 0.12;
+      spec.marker_m = 0.096;
+      spec.levels = 3;
+      spec.dictionary = "DICT_4X4_250";
       spec.margin_m = 0.02;
       break;
   }

@@ -54,7 +54,8 @@ BoardType boardTypeFromString(const std::string& name) {
   if (name == "charuco") return BoardType::kCharuco;
   if (name == "aprilgrid") return BoardType::kAprilGrid;
   if (name == "circles") return BoardType::kCircles;
-  badOption("board", "must be chessboard|charuco|aprilgrid|circles (got '" + name + "')");
+  if (name == "quadtree") return BoardType::kQuadtree;
+  badOption("board", "must be chessboard|charuco|aprilgrid|circles|quadtree (got '" + name + "')");
 }
 
 std::string frameFile(int frame, const char* extension) {

@@ -35,7 +35,7 @@ struct SynthOptions {
   double brightness_jitter = 0.0;  // per camera gain drawn in [1 - j, 1 + j]
   bool main_dolly = true;        // main camera moves along its dolly path (else fixed)
   double cg_overscan = 0.1;      // CG render of the main camera: extra fraction each way
-  std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles
+  std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree
   std::string camera = "main";   // intrinsics preset: which camera ("main" or "witness")
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
   int threads = 0;               // OpenMP threads (0 = default)

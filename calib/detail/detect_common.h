@@ -130,5 +130,6 @@ void detectChessboard(const DetectInput& input, const BoardSpec& board, ViewObse
 void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
 void detectAprilGrid(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
 void detectCircles(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
+void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObservations& out);
 
 }  // namespace previz::calib::detail

@@ -87,6 +87,16 @@ std::vector<BoardSpec> smallBoards() {
   circles.circle_radius_m = 0.011;
   circles.margin_m = 0.01;
   boards.push_back(circles);
+  BoardSpec quad;
+  quad.type = BoardType::kQuadtree;
+  quad.rows = quad.cols = 3;
+  quad.levels = 2;  // 8 outer markers of 48 mm, the centre cell's 2 x 2 of 24 mm
+  quad.square_m = 0.06;
+  quad.marker_m = 0.048;
+  quad.dictionary = "DICT_4X4_50";
+  quad.first_id = 2;
+  quad.margin_m = 0.01;
+  boards.push_back(quad);
   return boards;
 }
 

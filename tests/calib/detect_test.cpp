@@ -298,6 +298,80 @@ TEST(DetectAprilGrid, CornersWithinTenthPixelAndUnrefinedWithinHalfPixel) {
   EXPECT_LE(median(raw.errors), 0.5);
 }
 
+// Quadtree (core/board.h): marker corners are L-shaped black corners on white paper, refined by
+// cornerSubPix and then from the marker's two edges (detect_quadtree.cpp), within the marker's
+// border bit and the gap to its neighbours. Rendered with 1 px blur (a sharp render leaves the
+// edge step a pixel wide). Measured: 1052 of 1536 visible points (the centre cell's 24 mm
+// markers, 12-17 px here, are below min_marker_px or undecoded in the oblique views), median
+// 0.065 px with the edge refinement against 0.317 px for cornerSubPix alone (an L corner's
+// blurred tip pulls cornerSubPix into the black).
+TEST(DetectQuadtree, IdsMatchTruthAndMedianErrorBelowTenthPixel) {
+  const BoardSpec spec = synth::defaultBoard(BoardType::kQuadtree);
+  synth::RenderOptions soft = sharpRender();
+  soft.blur_sigma_px = 1.0;
+  const Figures fig = runPoses(spec, {}, false, soft);
+  EXPECT_EQ(fig.views_found, static_cast<int>(kPoses.size()));
+  EXPECT_GE(fig.points, 0.62 * fig.truth_points);
+  EXPECT_LE(median(fig.errors), 0.1);
+  DetectOptions subpix;
+  subpix.model_fit = false;
+  const Figures plain = runPoses(spec, subpix, false, soft);
+  std::printf("quadtree corners: model fit median %.4f px, cornerSubPix alone %.4f px\n",
+              median(fig.errors), median(plain.errors));
+  EXPECT_LE(median(fig.errors), 0.5 * median(plain.errors));
+
+  // min_marker_px between the outer ring's markers (96 mm, ~67 px frontal here) and the next
+  // ring's (48 mm, ~34 px): only outer-ring corners come out, and all of them.
+  const Camera camera = distortedCamera();
+  const PoseCase& p = kPoses[0];
+  const View view = render(camera, spec, boardPose(camera, spec, p.coverage, p.tilt_x, p.tilt_y, p.roll, p.target));
+  DetectOptions strict;
+  strict.min_marker_px = 50;
+  const ViewObservations big = detectBoard(view.bgr, spec, strict, "frontal");
+  const auto markers = quadtreeMarkers(spec);
+  int outer = 0;
+  for (const QuadtreeMarker& m : markers) outer += m.level == 0;
+  EXPECT_EQ(static_cast<int>(big.points.size()), 4 * outer);
+  for (const Observation& o : big.points) {
+    EXPECT_EQ(markers[static_cast<size_t>(o.id / 4)].level, 0) << "id " << o.id;
+    ASSERT_TRUE(view.truth.count(o.id));
+    EXPECT_LT((view.truth.at(o.id) - o.px).norm(), 0.2) << "id " << o.id;
+  }
+  std::printf("quadtree with min_marker_px 50: %zu points (outer ring: %d markers)\n",
+              big.points.size(), outer);
+}
+
+// A print whose ids start elsewhere than the board JSON says (first_id 0 printed, 16 assumed):
+// every marker decodes but sits where the layout puts another; the layout check must not let
+// any corner out with a wrong id.
+TEST(DetectQuadtree, FirstIdMismatchGivesNoWrongIds) {
+  const BoardSpec printed = synth::defaultBoard(BoardType::kQuadtree);
+  BoardSpec assumed = printed;
+  assumed.first_id = 16;
+  const Camera camera = distortedCamera();
+  int wrong = 0, returned = 0;
+  for (const PoseCase& p : kPoses) {
+    // The views of the test above (same render options: read from the cache).
+    synth::RenderOptions soft = sharpRender();
+    soft.blur_sigma_px = 1.0;
+    const View view = render(camera, printed,
+                             boardPose(camera, printed, p.coverage, p.tilt_x, p.tilt_y, p.roll, p.target),
+                             soft);
+    DetectOptions any;
+    any.min_points = 1;  // a lone marker that passed the check would count
+    const ViewObservations obs = detectBoard(view.bgr, assumed, any);
+    for (const Observation& o : obs.points) {
+      ++returned;
+      // Assumed id k is printed marker k + 16: the truth of the assumed layout is elsewhere.
+      const auto it = view.truth.find(o.id);
+      if (it == view.truth.end() || (it->second - o.px).norm() > 1.0) ++wrong;
+    }
+    std::printf("  first_id mismatch: %zu points; '%s'\n", obs.points.size(), obs.failure.c_str());
+  }
+  std::printf("quadtree first_id mismatch: %d points returned, %d wrong\n", returned, wrong);
+  EXPECT_EQ(wrong, 0);
+}
+
 // Circle centres: compared with the projection of the true centre, not with the centre of the
 // image ellipse, which lies off it under perspective and distortion. Measured in these poses
 // (16 spp): the outer ellipse's centre alone is off by 0.23 px median (0.32 max), the middle
@@ -318,8 +392,8 @@ TEST(DetectCircles, CentresMatchProjectedTruthWithinFiveHundredthsPixel) {
 // wrong ids.
 TEST(DetectPartial, HalfBoardOutOfImageGivesCorrectIdsOrAReason) {
   const Camera camera = distortedCamera();
-  for (BoardType type :
-       {BoardType::kCharuco, BoardType::kAprilGrid, BoardType::kChessboard, BoardType::kCircles}) {
+  for (BoardType type : {BoardType::kCharuco, BoardType::kAprilGrid, BoardType::kQuadtree,
+                         BoardType::kChessboard, BoardType::kCircles}) {
     const BoardSpec spec = synth::defaultBoard(type);
     // Centre on the right image border: about half the board outside.
     const Pose T = boardPose(camera, spec, 0.6, 10, -15, 5, {1.0, 0.5});
@@ -334,7 +408,12 @@ TEST(DetectPartial, HalfBoardOutOfImageGivesCorrectIdsOrAReason) {
       ASSERT_NE(it, view.truth.end()) << toString(type) << ": id " << o.id << " not visible";
       EXPECT_LT((it->second - o.px).norm(), 0.5) << toString(type) << ": id " << o.id;
     }
-    if (type == BoardType::kCharuco || type == BoardType::kAprilGrid) {
+    if (type == BoardType::kQuadtree) {
+      // Visible includes the corners of markers the border cuts, and the centre cell's 24 mm
+      // markers (14 px here, 2.4 px a bit) rarely decode on this sharp 4-spp render: measured
+      // 46 of 131, every one with its right id and within 0.5 px.
+      EXPECT_GE(obs.points.size(), 0.3 * view.truth.size()) << toString(type);
+    } else if (type == BoardType::kCharuco || type == BoardType::kAprilGrid) {
       EXPECT_GE(obs.points.size(), 0.6 * view.truth.size()) << toString(type);
     } else {
       EXPECT_FALSE(obs.found()) << toString(type);
@@ -403,8 +482,8 @@ TEST(DetectBadInput, EmptyOrWrongTypeImageThrowsNamingTheSource) {
     EXPECT_NE(std::string(e.what()).find("subpixel_window_px"), std::string::npos) << e.what();
   }
   // A blank image is not an error: no board, with a reason.
-  for (BoardType type :
-       {BoardType::kChessboard, BoardType::kCharuco, BoardType::kAprilGrid, BoardType::kCircles}) {
+  for (BoardType type : {BoardType::kChessboard, BoardType::kCharuco, BoardType::kAprilGrid,
+                         BoardType::kCircles, BoardType::kQuadtree}) {
     const ViewObservations obs = detectBoard(cv::Mat(120, 160, CV_8UC3, cv::Scalar(200, 200, 200)),
                                              synth::defaultBoard(type), {}, "blank");
     EXPECT_FALSE(obs.found());

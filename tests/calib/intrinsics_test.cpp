@@ -304,6 +304,19 @@ TEST(Intrinsics, Table51CirclesMeasured) {
   expectWithinSigma(radial);
 }
 
+// Quadtree ArUco board (the thesis' own design, 5 x 5 cells of 12 cm, 3 levels): marker corners
+// are L-shaped, refined by cornerSubPix and then from the markers' edges (detect_quadtree.cpp);
+// the centre cell's 24 mm markers come out only in the nearer views (187 of 256 points a view).
+// Measured (2 seeds, radial): |dfx| 0.022 px, |dfy| 0.018, |dcx| 0.021, |dcy| 0.049, |dk1|
+// 0.00013, sigma f 0.080 px: the thesis targets are met here, but with sigma f 0.08 px two
+// seeds cannot hold the 0.05 px bound, so it is held like AprilGrid and circles: to 4 sigma
+// and every truth within 3 sigma (full model too).
+TEST(Intrinsics, Table51QuadtreeMeasured) {
+  const auto [full, radial] = runTable51(BoardType::kQuadtree, 2);
+  expectWithinSigma(radial);
+  EXPECT_EQ(full.within, full.checked) << "worst: " << full.worst << " at " << full.worst_ratio;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Real data: OpenCV's left camera sample images (9 x 6 inner corners, square 1 unit).
 

@@ -61,6 +61,8 @@ inline BoardSpec thesisBoard(BoardType type) {
     case BoardType::kCircles:
       b.rows = 9, b.cols = 12, b.square_m = 0.05, b.circle_radius_m = 0.018, b.margin_m = 0.02;
       break;
+    case BoardType::kQuadtree:
+      break;  // the studio's: 5 x 5 cells of 12 cm, 3 levels (0.6 m square, 64 markers)
   }
   b.validate();
   return b;

@@ -119,10 +119,78 @@ TEST(BoardSpec, PointsAndSizesFollowTheDocumentedLayout) {
   EXPECT_TRUE(pts[circles.cols + 1].p_board.isApprox(Eigen::Vector3d(1.5 * circles.square_m, 1.5 * circles.square_m, 0)));
 }
 
+// Quadtree (core/board.h): 5 x 5 cells, 3 levels: ring 0 (16 cells) one marker each, ring 1
+// (8 cells) 2 x 2, the centre cell 4 x 4; markers ordered by cell row-major, then sub-cell
+// row-major; each centred in its (sub-)cell with edge marker_m / 2^level; corners tl, tr, br, bl.
+TEST(BoardSpec, QuadtreeMarkersShrinkByChebyshevRing) {
+  const BoardSpec q = defaultBoard(BoardType::kQuadtree);
+  ASSERT_EQ(q.cols, 5);
+  ASSERT_EQ(q.levels, 3);
+  const double s = q.square_m, m = q.marker_m;
+  const auto markers = quadtreeMarkers(q);
+  ASSERT_EQ(markers.size(), 16u + 8 * 4 + 16);
+  EXPECT_EQ(quadtreeLevel(q, 0, 3), 0);
+  EXPECT_EQ(quadtreeLevel(q, 1, 3), 1);
+  EXPECT_EQ(quadtreeLevel(q, 3, 1), 1);
+  EXPECT_EQ(quadtreeLevel(q, 2, 2), 2);
+  // Cell (0, 0): marker 0; cells (0, 1..4) markers 1-4; cell (1, 0) marker 5; cell (1, 1):
+  // markers 6-9, its top-right sub-cell is marker 7.
+  EXPECT_TRUE(markers[0].top_left.isApprox(Eigen::Vector2d::Constant(0.5 * (s - m))));
+  EXPECT_NEAR(markers[0].edge_m, m, 1e-15);
+  EXPECT_TRUE(markers[5].top_left.isApprox(Eigen::Vector2d(0.5 * (s - m), s + 0.5 * (s - m))));
+  EXPECT_EQ(markers[7].level, 1);
+  EXPECT_NEAR(markers[7].edge_m, m / 2, 1e-15);
+  EXPECT_TRUE(markers[7].top_left.isApprox(
+      Eigen::Vector2d(1.5 * s + 0.25 * (s - m), s + 0.25 * (s - m))));
+  // The centre cell (2, 2) comes after 5 + 5 + 2 cells of ring 0 and 2 of ring 1 (row 1 has
+  // 3 ring-1 cells): markers 5 + (1 + 3*4 + 1) + (1 + 4) = 24 onwards, 16 of them, edge m / 4.
+  const int centre_first = 5 + (1 + 3 * 4 + 1) + (1 + 4);
+  EXPECT_EQ(markers[centre_first].level, 2);
+  EXPECT_EQ(markers[centre_first + 15].level, 2);
+  EXPECT_EQ(markers[centre_first + 16].level, 1);
+  EXPECT_TRUE(markers[centre_first].top_left.isApprox(
+      Eigen::Vector2d::Constant(2 * s + 0.125 * (s - m))));
+  EXPECT_TRUE(markers[centre_first + 15].top_left.isApprox(
+      Eigen::Vector2d::Constant(3 * s - 0.25 * s + 0.125 * (s - m))));
+  // Every marker inside its cell, none overlapping another (centres a cell apart at least).
+  for (size_t i = 0; i < markers.size(); ++i) {
+    const Eigen::Vector2d c = markers[i].top_left + Eigen::Vector2d::Constant(0.5 * markers[i].edge_m);
+    for (size_t j = 0; j < i; ++j) {
+      const Eigen::Vector2d d =
+          markers[j].top_left + Eigen::Vector2d::Constant(0.5 * markers[j].edge_m) - c;
+      EXPECT_GE(d.lpNorm<Eigen::Infinity>(),
+                0.5 * (markers[i].cell_m + markers[j].cell_m) - 1e-12) << i << " " << j;
+    }
+  }
+  const auto pts = boardPoints(q);
+  ASSERT_EQ(pts.size(), 4 * markers.size());
+  for (size_t i = 0; i < markers.size(); ++i) {
+    const Eigen::Vector2d& p = markers[i].top_left;
+    const double e = markers[i].edge_m;
+    EXPECT_EQ(pts[4 * i + 2].id, static_cast<int>(4 * i + 2));
+    EXPECT_TRUE(pts[4 * i + 0].p_board.isApprox(Eigen::Vector3d(p.x(), p.y(), 0)));
+    EXPECT_TRUE(pts[4 * i + 1].p_board.isApprox(Eigen::Vector3d(p.x() + e, p.y(), 0)));
+    EXPECT_TRUE(pts[4 * i + 2].p_board.isApprox(Eigen::Vector3d(p.x() + e, p.y() + e, 0)));
+    EXPECT_TRUE(pts[4 * i + 3].p_board.isApprox(Eigen::Vector3d(p.x(), p.y() + e, 0)));
+  }
+  EXPECT_TRUE(q.size_m().isApprox(Eigen::Vector2d(5 * s, 5 * s)));
+  // levels = 1: a plain grid of markers; a 6 x 6 board with 2 levels: ring 0 (20 cells), the
+  // 16 inner cells split 2 x 2.
+  BoardSpec plain = q;
+  plain.levels = 1;
+  EXPECT_EQ(quadtreeMarkers(plain).size(), 25u);
+  BoardSpec even = q;
+  even.rows = even.cols = 6;
+  even.levels = 2;
+  EXPECT_EQ(quadtreeMarkers(even).size(), 20u + 16 * 4);
+}
+
 TEST(BoardSpec, JsonRoundTripAndFileRoundTrip) {
-  for (BoardType type : {BoardType::kChessboard, BoardType::kCharuco, BoardType::kAprilGrid, BoardType::kCircles}) {
+  for (BoardType type : {BoardType::kChessboard, BoardType::kCharuco, BoardType::kAprilGrid,
+                         BoardType::kCircles, BoardType::kQuadtree}) {
     BoardSpec spec = defaultBoard(type);
-    spec.first_id = type == BoardType::kCharuco ? 100 : 0;
+    spec.first_id = type == BoardType::kCharuco ? 100 : type == BoardType::kQuadtree ? 30 : 0;
+    if (type == BoardType::kQuadtree) spec.levels = 2;
     const BoardSpec back = boardFromJson(boardToJson(spec));
     EXPECT_EQ(back.type, spec.type);
     EXPECT_EQ(back.rows, spec.rows);
@@ -134,6 +202,7 @@ TEST(BoardSpec, JsonRoundTripAndFileRoundTrip) {
     EXPECT_EQ(back.first_id, spec.first_id);
     EXPECT_EQ(back.legacy_pattern, spec.legacy_pattern);
     EXPECT_EQ(back.margin_m, spec.margin_m);
+    EXPECT_EQ(back.levels, spec.levels);
     const fs::path path = test::scratchDir("board_test", "specs") / (std::string(toString(type)) + ".json");
     writeBoard(spec, path);
     const BoardSpec file = readBoard(path);
@@ -178,6 +247,24 @@ TEST(BoardSpec, ValidateNamesTheBadField) {
   b = defaultBoard(BoardType::kCircles);
   b.margin_m = -1;
   expectField(b, "margin_m");
+  b = defaultBoard(BoardType::kQuadtree);
+  b.rows = 4;
+  expectField(b, "rows");  // rows must equal cols
+  b = defaultBoard(BoardType::kQuadtree);
+  b.levels = 0;
+  expectField(b, "levels");
+  b = defaultBoard(BoardType::kQuadtree);
+  b.marker_m = b.square_m;
+  expectField(b, "marker_m");
+  b = defaultBoard(BoardType::kQuadtree);
+  b.dictionary = "DICT_4X4_50";  // 64 markers
+  expectField(b, "first_id");
+  b = defaultBoard(BoardType::kQuadtree);
+  b.first_id = 200;  // 64 markers past DICT_4X4_250's codes
+  expectField(b, "first_id");
+  b = defaultBoard(BoardType::kQuadtree);
+  b.dictionary = "tag36h11";
+  expectField(b, "dictionary");
 
   // JSON readers: wrong type and unknown board type name the field and the file.
   nlohmann::json j = boardToJson(defaultBoard(BoardType::kCharuco));
@@ -190,12 +277,42 @@ TEST(BoardSpec, ValidateNamesTheBadField) {
     EXPECT_EQ(e.context().file, "b.json");
   }
   j = boardToJson(defaultBoard(BoardType::kCharuco));
-  j["type"] = "quadtree";
+  j["type"] = "hexagons";
   try {
     boardFromJson(j, "b.json");
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
     EXPECT_EQ(e.context().field, "type");
+  }
+  // Quadtree JSON: "levels" read, wrong type or out of range named; not allowed on others.
+  j = boardToJson(defaultBoard(BoardType::kQuadtree));
+  EXPECT_EQ(j.at("type"), "quadtree");
+  EXPECT_EQ(j.at("levels"), 3);
+  for (const nlohmann::json& bad : {nlohmann::json("3"), nlohmann::json(2.5), nlohmann::json(9)}) {
+    j["levels"] = bad;
+    try {
+      boardFromJson(j, "q.json");
+      ADD_FAILURE() << "no error for levels " << bad.dump();
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().field, "levels") << e.what();
+      EXPECT_EQ(e.context().file, "q.json");
+    }
+  }
+  j = boardToJson(defaultBoard(BoardType::kQuadtree));
+  j["cols"] = 6;
+  try {
+    boardFromJson(j, "q.json");
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().field, "rows") << e.what();
+  }
+  j = boardToJson(defaultBoard(BoardType::kCharuco));
+  j["levels"] = 2;
+  try {
+    boardFromJson(j, "b.json");
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().field, "levels") << e.what();
   }
   j = boardToJson(defaultBoard(BoardType::kCharuco));
   j["marker_m"] = 1.0;
@@ -413,6 +530,71 @@ TEST(BoardDrawing, CirclesRingsCentredAtBoardPoints) {
   const double max_err = *std::max_element(errors.begin(), errors.end());
   EXPECT_LE(max_err, 0.05);
   std::printf("[ circles ] %zu centres, centroid error max %.4f px (R = %.0f px)\n", errors.size(), max_err, R);
+}
+
+TEST(BoardDrawing, QuadtreeMarkersDecodedByOpenCvAtBoardPoints) {
+  // OpenCV's ArUco detector on an orthographic render (1.2 mm pixels: the centre cell's 24 mm
+  // markers are 20 px, 3.3 px a bit): every marker decodes with id first_id + index, its
+  // corners in OpenCV's order at boardPoints 4 * index + k (OpenCV's unrefined corners, the
+  // thresholded contour's polygon, sit up to a pixel inside the marker; a corner out of order
+  // would be a marker edge, 20 px or more, off).
+  BoardSpec spec = defaultBoard(BoardType::kQuadtree);
+  spec.first_id = 11;
+  const OrthoView view = viewOf(spec, 0.0012);
+  const cv::Mat image = renderOrtho(spec, someBoardPose(), view);
+  const auto dictionary = cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_250);
+  std::vector<std::vector<cv::Point2f>> marker_corners;
+  std::vector<int> marker_ids;
+  cv::aruco::detectMarkers(image, dictionary, marker_corners, marker_ids);
+  const auto points = boardPoints(spec);
+  const auto markers = quadtreeMarkers(spec);
+  std::vector<bool> seen(markers.size(), false);
+  std::vector<double> corner_errors;
+  for (size_t i = 0; i < marker_ids.size(); ++i) {
+    const int index = marker_ids[i] - spec.first_id;
+    ASSERT_GE(index, 0);
+    ASSERT_LT(index, static_cast<int>(markers.size()));
+    seen[index] = true;
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d expected = view.toPixel(points[4 * index + k].p_board);
+      const Eigen::Vector2d got(marker_corners[i][k].x, marker_corners[i][k].y);
+      corner_errors.push_back((got - expected).norm());
+    }
+  }
+  // The drawing itself: every marker's top edge at its middle column and left edge at its
+  // middle row, from the white fraction of the pixel the edge crosses (linear light, levels
+  // from the paper 2 px outside and the border bit's middle 0.5 bit inside): where
+  // quadtreeMarkers() puts them, to the render's coverage quantisation (1/16 px) and rounding.
+  auto lin = [&](double u, double v) {
+    const double x = image.at<std::uint8_t>(static_cast<int>(std::lround(v)), static_cast<int>(std::lround(u))) / 255.0;
+    return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
+  };
+  std::vector<double> edge_errors;
+  for (const QuadtreeMarker& m : markers) {
+    const double bit_px = m.edge_m / 6 / view.px;
+    for (int side = 0; side < 2; ++side) {
+      // side 0: top edge, crossing along v at the middle column; side 1: left edge along u.
+      const Eigen::Vector3d at_board = side == 0
+          ? Eigen::Vector3d(m.top_left.x() + 0.5 * m.edge_m, m.top_left.y(), 0)
+          : Eigen::Vector3d(m.top_left.x(), m.top_left.y() + 0.5 * m.edge_m, 0);
+      const Eigen::Vector2d at = view.toPixel(at_board);
+      const double truth = side == 0 ? at.y() : at.x();
+      const double crossed = std::round(truth);
+      auto sample = [&](double d) { return side == 0 ? lin(at.x(), d) : lin(d, at.y()); };
+      const double white = sample(crossed - 2), black = sample(truth + 0.5 * bit_px);
+      const double f = (sample(crossed) - black) / (white - black);
+      edge_errors.push_back(std::abs(crossed - 0.5 + f - truth));
+    }
+  }
+  const double max_edge = *std::max_element(edge_errors.begin(), edge_errors.end());
+  EXPECT_LE(max_edge, 0.08);
+  EXPECT_EQ(std::count(seen.begin(), seen.end(), true), static_cast<long>(markers.size()));
+  ASSERT_FALSE(corner_errors.empty());
+  const double max_corner = *std::max_element(corner_errors.begin(), corner_errors.end());
+  EXPECT_LE(max_corner, 1.5);
+  std::printf("[ quadtree ] %zu/%zu markers decoded, OpenCV's corners median %.3f px max %.3f "
+              "px; drawn edges max %.4f px from the layout\n",
+              marker_ids.size(), markers.size(), median(corner_errors), max_corner, max_edge);
 }
 
 TEST(BoardDrawing, BackIsPlainAndHitsAreBoardClass) {

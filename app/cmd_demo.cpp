@@ -172,12 +172,17 @@ std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, con
     const BoardSpec board = readBoard(take / "board.json");
     std::vector<calib::ViewObservations> obs(o.frames);
     calib::DetectOptions detect;
-#pragma omp parallel for schedule(dynamic)
+    std::vector<cv::Mat> images(o.frames);  // read here: nothing may throw inside the parallel loop
+    std::vector<std::string> sources(o.frames);
     for (int f = 0; f < o.frames; ++f) {
       const fs::path image_path = take / "cams" / name / (stem(f) + ".png");
-      const cv::Mat image = readImage(image_path, cv::IMREAD_COLOR);
-      obs[f] = calib::detectBoard(image, board, detect, image_path.string());
-      obs[f].image_size = image.size();
+      images[f] = readImage(image_path, cv::IMREAD_COLOR);
+      sources[f] = image_path.string();
+    }
+#pragma omp parallel for schedule(dynamic)
+    for (int f = 0; f < o.frames; ++f) {
+      obs[f] = calib::detectBoard(images[f], board, detect, sources[f]);
+      obs[f].image_size = images[f].size();
     }
     CameraCalib c;
     c.camera = name;

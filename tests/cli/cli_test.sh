@@ -11,6 +11,12 @@ expect_fail "unknown command fails" "nosuch|not expected|Extras" "$bin" nosuch
 expect_fail "frames 0 names the field" "frames" "$bin" synth --out "$tmp/x" --frames 0 --quiet
 expect_fail "bad size names the flag" "--size" "$bin" synth --out "$tmp/x" --size 0x5 --quiet
 expect_fail "unknown board names the field" "board" "$bin" synth --preset intrinsics --board nosuch --out "$tmp/x" --quiet
+expect_fail "unknown intrinsics camera names the field" "camera" "$bin" synth --preset intrinsics --camera witness04 --cams 3 --out "$tmp/x" --quiet
+if "$bin" synth --preset intrinsics --camera witness03 --cams 3 --frames 1 --size 160x90 --out "$tmp/intr3" --quiet >/dev/null 2>&1 \
+   && [ -s "$tmp/intr3/cams/witness03/000000.png" ] && grep -q '"witness03"' "$tmp/intr3/truth/rig.json" \
+   && ! grep -q '"witness01"' "$tmp/intr3/truth/rig.json"; then
+  ok "synth intrinsics films the witness --camera names"
+else fail "synth intrinsics --camera witness03"; fi
 printf '{"units": "m", "cameras": [ {"name": "a", "width": 10' > "$tmp/broken.json"
 expect_fail "malformed rig names the file" "broken.json" "$bin" camera info --rig "$tmp/broken.json"
 printf 'cam0 1 2 3\n' > "$tmp/short.txt"
@@ -60,8 +66,9 @@ else
   fail "real data missing: $par"
 fi
 
-if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run/composite/000001.png" ]; then
-  ok "demo writes a contact sheet, the composites and the report page"
-else fail "demo"; fi
+if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --no-calibrate --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run_true/composite/000001.png" ]; then
+  ok "demo --no-calibrate writes a contact sheet, the composites and the report page"
+else fail "demo --no-calibrate"; fi
+expect_fail "demo --views 2 names the flag" "--views" "$bin" demo --out "$tmp/demo_bad" --frames 2 --cams 3 --size 160x90 --views 2 --quiet
 
 finish

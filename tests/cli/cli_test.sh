@@ -69,6 +69,25 @@ fi
 if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --no-calibrate --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run_true/composite/000001.png" ]; then
   ok "demo --no-calibrate writes a contact sheet, the composites and the report page"
 else fail "demo --no-calibrate"; fi
+# Every src/href of a report page is relative and exists.
+links_ok() {
+  local dir="$1" ref
+  for ref in $(grep -o -E '(src|href)="[^"]+"' "$dir/report.html" | sed -E 's/^(src|href)="//; s/"$//'); do
+    case "$ref" in /*|*://*) return 1 ;; esac
+    [ -e "$dir/$ref" ] || return 1
+  done
+}
+links_ok "$tmp/demo" && ok "demo --no-calibrate report links exist" || fail "demo --no-calibrate report links"
+# The calibrating path at the smallest setting found to work (the rig take's AprilGrid needs
+# ~960 px wide witnesses to decode, and 8 witnesses to chain every camera to the others): ~100 s.
+if "$bin" demo --out "$tmp/demo_cal" --frames 1 --cams 8 --size 960x540 --views 4 --rig-frames 24 --quiet >/dev/null 2>&1 \
+   && [ -s "$tmp/demo_cal/rig.json" ] && [ -s "$tmp/demo_cal/rig.png" ] && [ -s "$tmp/demo_cal/calib/main.residuals.png" ] \
+   && [ -s "$tmp/demo_cal/calib/witness08.report.json" ] && [ -s "$tmp/demo_cal/tracked_main.jsonl" ] \
+   && [ -s "$tmp/demo_cal/run/composite/000000.png" ] && [ -s "$tmp/demo_cal/run_true/composite/000000.png" ] \
+   && grep -q "Rig calibration" "$tmp/demo_cal/report.html" && links_ok "$tmp/demo_cal"; then
+  ok "demo calibrates the cameras and the rig, runs the take with it, report links exist"
+else fail "demo (calibrating)"; fi
+rm -rf "$tmp/demo_cal"
 expect_fail "demo --views 2 names the flag" "--views" "$bin" demo --out "$tmp/demo_bad" --frames 2 --cams 3 --size 160x90 --views 2 --quiet
 
 finish

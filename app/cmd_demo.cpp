@@ -1,12 +1,18 @@
-// previz demo (README command 1): renders the built-in synthetic studio, writes a contact sheet,
-// runs the live frame (key -> carve -> main-view depth -> composite, app/frame_loop.h) over the
-// take with its rig, and writes a report page (report.html) with the composites beside the true
-// ones, depth previews, the front/behind layer and the stage timings. Calibrating the cameras
-// from board takes is not part of the demo yet: it runs on the take's rig (truth/rig.json).
+// previz demo (README command 1): renders the built-in synthetic studio, calibrates every
+// camera's intrinsics from its own board take (intrinsics preset: detect, solve, calib report
+// pictures), calibrates the rig from a rig take (rig preset: board waved, then on the floor;
+// intrinsics held at the calibrated ones), runs the live frame (key -> carve -> main-view depth
+// -> composite, app/frame_loop.h) over the studio take with the calibrated rig (the main
+// camera's dolly motion from the take's tracker file, relative to where it stood during the rig
+// take) and, for comparison, with the take's true rig, and writes a report page (report.html):
+// calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
+// depth previews, the front/behind layer and the stage timings. Layout: docs/formats.md.
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <chrono>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -15,13 +21,23 @@
 
 #include "app/commands.h"
 #include "app/frame_loop.h"
-#include "carving/take.h"
-#include "composite/output.h"
 #include "app/options.h"
 #include "app/progress.h"
+#include "calib/detect.h"
+#include "calib/intrinsics.h"
+#include "calib/report.h"
+#include "calib/validation.h"
+#include "carving/take.h"
+#include "composite/measure.h"
+#include "composite/output.h"
+#include "core/board.h"
 #include "core/io.h"
+#include "core/pose.h"
 #include "core/rig.h"
 #include "datasets/synth.h"
+#include "multicam/observations.h"
+#include "multicam/rig_calib.h"
+#include "multicam/rig_picture.h"
 
 namespace previz::app {
 namespace {
@@ -34,6 +50,9 @@ struct DemoArgs {
   int frames = 12;
   int cams = 8;
   std::uint64_t seed = 1;
+  int views = 12;        // intrinsics board views per camera
+  int rig_frames = 48;   // rig take frames (the last few show the floor board)
+  bool no_calibrate = false;
   bool json = false;
   bool quiet = false;
 };
@@ -112,78 +131,339 @@ std::string stem(int frame) {
   return s;
 }
 
-// Runs the live frame over the take (true rig, true main poses) into out/run and returns the
-// per-frame stage timings.
-std::vector<std::vector<StageTime>> runTake(const fs::path& take_dir, const fs::path& out, bool quiet) {
+// One camera's intrinsics as the demo calibrated them, against the take's truth.
+struct CameraCalib {
+  std::string camera;
+  Camera truth;
+  calib::IntrinsicsResult result;
+  int views = 0, found = 0;
+};
+
+// The rig as the demo calibrated it, against the rig take's truth.
+struct RigCalib {
+  multicam::RigCalibResult result;
+  Rig truth;
+  int frames = 0;
+  std::vector<int> floor_frames;
+  double detect_s = 0;
+};
+
+// Per camera of the studio rig: an intrinsics-preset take of its own (the board moved and tilted
+// in front of it), detected and solved; the report files go to out/calib/<camera>.*.
+std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, const Rig& truth, int views,
+                                          const fs::path& out, bool quiet) {
+  std::vector<CameraCalib> all;
+  for (const RigCamera& rc : truth.cameras) {
+    const std::string& name = rc.camera.name;
+    synth::SynthOptions o = studio;
+    o.preset = synth::Preset::kIntrinsics;
+    o.camera = name;
+    // A chessboard: always seen whole here, found at the smallest sizes, and its corners get the
+    // pattern fit (calib/detect.h model_fit).
+    o.board = "chessboard";
+    o.frames = views;
+    o.fps = 24;
+    o.validate();
+    const fs::path take = out / "calib_takes" / name;
+    {
+      ProgressLine progress("demo intrinsics take " + name, o.frames, quiet);
+      synth::synthesizeTake(o, take, [&](const synth::SynthProgress& p) { progress.update(p.frames_done); });
+    }
+    const BoardSpec board = readBoard(take / "board.json");
+    std::vector<calib::ViewObservations> obs(o.frames);
+    calib::DetectOptions detect;
+    std::vector<cv::Mat> images(o.frames);  // read here: nothing may throw inside the parallel loop
+    std::vector<std::string> sources(o.frames);
+    for (int f = 0; f < o.frames; ++f) {
+      const fs::path image_path = take / "cams" / name / (stem(f) + ".png");
+      images[f] = readImage(image_path, cv::IMREAD_COLOR);
+      sources[f] = image_path.string();
+    }
+#pragma omp parallel for schedule(dynamic)
+    for (int f = 0; f < o.frames; ++f) {
+      obs[f] = calib::detectBoard(images[f], board, detect, sources[f]);
+      obs[f].image_size = images[f].size();
+    }
+    CameraCalib c;
+    c.camera = name;
+    c.truth = rc.camera;
+    c.views = o.frames;
+    for (const auto& v : obs) c.found += v.found();
+    calib::IntrinsicsOptions solve;
+    solve.camera_name = name;
+    solve.threads = 2;
+    c.result = calib::calibrateIntrinsics(obs, board, solve);  // throws naming the camera's views
+    calib::CalibReport report;
+    report.result = c.result;
+    report.board = board;
+    report.views = obs;
+    calib::UncertaintyOptions uncertainty;
+    uncertainty.mode = c.result.joint_covariance.size() > 0 ? calib::UncertaintyMode::kMeanFrames
+                                                            : calib::UncertaintyMode::kIntrinsicsOnly;
+    if (c.result.covariance_ok) report.uncertainty = calib::projectionUncertainty(c.result, uncertainty);
+    calib::writeCalibReport(report, out / "calib" / name);
+    std::cerr << "demo: " << name << ": board in " << c.found << " of " << c.views << " views; "
+              << c.result.briefReport() << "\n";
+    all.push_back(std::move(c));
+  }
+  return all;
+}
+
+// A rig-preset take (board waved through the volume, then on the floor), detected and solved
+// with every camera's intrinsics held at the calibrated ones; writes out/rig.json and the rig
+// picture out/rig.png (+ .svg).
+RigCalib calibrateRigTake(const synth::SynthOptions& studio, const std::vector<CameraCalib>& cameras, int frames,
+                          const fs::path& out, bool quiet) {
+  synth::SynthOptions o = studio;
+  o.preset = synth::Preset::kRig;
+  // AprilGrid: partial views decode (every tag carries its id), as the witnesses see the board.
+  o.board = "aprilgrid";
+  o.frames = frames;
+  o.fps = 24;
+  o.validate();
+  const fs::path take = out / "rig_take";
+  {
+    ProgressLine progress("demo rig take", o.frames, quiet);
+    synth::synthesizeTake(o, take, [&](const synth::SynthProgress& p) { progress.update(p.frames_done); });
+  }
+  RigCalib r;
+  r.frames = frames;
+  r.truth = readRig(take / "truth" / "rig.json");
+  const BoardSpec board = readBoard(take / "board.json");
+  const multicam::FloorSpec floor = multicam::readFloor(take / "floor.json");
+  r.floor_frames = floor.frames;
+  const std::vector<std::string> names = multicam::takeCameras(take);
+  const auto start = std::chrono::steady_clock::now();
+  multicam::RigObservations obs;
+  {
+    ProgressLine progress("demo rig detect", static_cast<int>(names.size()) * frames, quiet);
+    obs = multicam::detectTake(take, names, board, &floor, multicam::DetectTakeOptions{},
+                               [&](const multicam::DetectProgress& p) { progress.update(p.images_done); });
+  }
+  r.detect_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  Rig initial = r.truth;  // names and roles; poses are ignored, intrinsics replaced below
+  for (RigCamera& rc : initial.cameras) {
+    rc.T_world_cam = Pose::Identity();
+    bool calibrated = false;
+    for (const CameraCalib& c : cameras) {
+      if (c.camera != rc.camera.name) continue;
+      rc.camera = c.result.camera;
+      calibrated = true;
+    }
+    if (!calibrated) {
+      ErrorContext context;
+      context.camera = rc.camera.name;
+      throw Error("demo: no calibrated intrinsics for " + rc.camera.name, context);
+    }
+  }
+  r.result = multicam::calibrateRig(obs, initial, multicam::RigCalibOptions{});
+  writeRig(r.result.rig, out / "rig.json");
+  multicam::writeRigPicture(r.result.rig, &floor, out / "rig");
+  std::cerr << "demo: rig calibrated from " << frames << " frames (" << floor.frames.size()
+            << " floor): RMS " << r.result.rms_px << " px, world from floor " << r.result.world_from_floor << "\n";
+  return r;
+}
+
+// The camera tracker's file for the studio take: main's motion T_main0_main(f) from where it
+// stood during the rig take (the tracker is zeroed there), here taken from the take's
+// truth/main_poses.jsonl as a tracker would give it (app/frame_loop.h TakeInputOptions).
+void writeTrackedMain(const fs::path& take, const Pose& T_world_main0, const fs::path& path) {
+  std::istringstream in(readTextFile(take / "truth" / "main_poses.jsonl"));
+  std::string lines;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty()) continue;
+    const nlohmann::json j = nlohmann::json::parse(line);
+    const Pose T_main0_main = T_world_main0.inverse() * poseFromJson(j.at("T_world_cam"));
+    lines += nlohmann::json{{"frame", j.at("frame")}, {"T_main0_main", poseToJson(T_main0_main)}}.dump() + "\n";
+  }
+  writeFileAtomic(path, lines);
+}
+
+struct RunResult {
+  std::vector<std::vector<StageTime>> times;
+  std::vector<double> psnr_db;  // per frame, over the actor's bounding box vs truth/composite
+  double min_psnr_db = 99, mean_psnr_db = 0;
+};
+
+// Runs the live frame over the take with the rig at rig_path (tracked: the tracker's main poses,
+// empty = the take's true main poses) into 'out' and measures each composite against the truth.
+RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::path& tracked,
+                  const fs::path& out, bool layers, const std::string& label, bool quiet) {
   carving::TakeSource src;
   src.take_dir = take_dir;
-  src.rig_path = take_dir / "truth" / "rig.json";
-  src.main_poses = take_dir / "truth" / "main_poses.jsonl";
+  src.rig_path = rig_path;
+  if (tracked.empty()) src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   const carving::Take take(src);
   FrameLoopOptions lo;
   lo.debug_layers = true;
   FrameLoop loop(take.rig(), composite::readCgCamera(take_dir / "cg" / "camera.json"), lo);
-  const TakeReader reader(take, loop, TakeInputOptions{});
+  TakeInputOptions io;
+  io.tracked_main_poses = tracked;
+  const TakeReader reader(take, loop, io);
   composite::OutputOptions oo;
   oo.out = out;
-  oo.layers = true;
-  oo.video = "composite.avi";
-  oo.fourcc = "MJPG";
+  oo.layers = layers;
+  if (layers) {
+    oo.video = "composite.avi";
+    oo.fourcc = "MJPG";
+  }
   composite::CompositeWriter writer(oo);
-  std::vector<std::vector<StageTime>> times;
-  ProgressLine progress("demo run", static_cast<int>(take.frames().size()), quiet);
+  RunResult r;
+  ProgressLine progress(label, static_cast<int>(take.frames().size()), quiet);
   for (int f : take.frames()) {
     FrameState s;
     reader.read(f, s);
-    times.push_back(loop.run(s));
+    r.times.push_back(loop.run(s));
     writer.write(f, s.composite);
-    progress.update(static_cast<int>(times.size()));
+    const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (stem(f) + ".png"), cv::IMREAD_COLOR);
+    const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (stem(f) + ".png"), cv::IMREAD_GRAYSCALE);
+    r.psnr_db.push_back(composite::actorPsnr(s.composite.bgr, truth, mask).psnr_db);
+    r.min_psnr_db = std::min(r.min_psnr_db, r.psnr_db.back());
+    r.mean_psnr_db += r.psnr_db.back();
+    progress.update(static_cast<int>(r.times.size()));
   }
   writer.close();
-  return times;
+  if (!r.psnr_db.empty()) r.mean_psnr_db /= r.psnr_db.size();
+  return r;
+}
+
+std::string num(double v, int decimals) {
+  char s[64];
+  std::snprintf(s, sizeof(s), "%.*f", decimals, v);
+  return s;
 }
 
 // report.html beside the take: every path in it is relative, so the folder can be moved.
-void writeReport(const fs::path& out, const std::vector<int>& frames, const std::vector<std::vector<StageTime>>& times,
-                 const synth::SynthOptions& o) {
+// calibrated: the run with the rig previz calibrated (absent with --no-calibrate); truth: the
+// run with the take's true rig.
+void writeReport(const fs::path& out, const std::vector<int>& frames, const synth::SynthOptions& o,
+                 const std::vector<CameraCalib>& cameras, const std::optional<RigCalib>& rig,
+                 const std::optional<RunResult>& calibrated, const RunResult& truth) {
+  const RunResult& shown = calibrated ? *calibrated : truth;
+  const std::string shown_dir = calibrated ? "run" : "run_true";
   std::map<std::string, double> mean;
   std::vector<std::string> order;
-  for (const auto& frame : times)
+  for (const auto& frame : shown.times)
     for (const StageTime& t : frame) {
       if (!mean.count(t.stage)) order.push_back(t.stage);
-      mean[t.stage] += t.ms / times.size();
+      mean[t.stage] += t.ms / shown.times.size();
     }
   std::ostringstream h;
   h << "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>previz demo</title><style>"
-       "body{font-family:sans-serif;background:#222;color:#ddd;margin:2em}img{width:100%}"
-       "table{border-collapse:collapse}td,th{border:1px solid #555;padding:4px 10px;text-align:right}"
-       ".row{display:grid;grid-template-columns:repeat(4,1fr);gap:6px;margin-bottom:14px}"
-       ".row div{font-size:12px}</style></head><body>\n";
+       "body{font-family:sans-serif;background:#222;color:#ddd;margin:2em}img{width:100%}a{color:#9cf}"
+       "table{border-collapse:collapse;margin-bottom:1em}td,th{border:1px solid #555;padding:4px 10px;text-align:right}"
+       ".row{display:grid;grid-template-columns:repeat(5,1fr);gap:6px;margin-bottom:14px}"
+       ".cal{display:grid;grid-template-columns:repeat(4,1fr);gap:6px;margin-bottom:14px}"
+       ".row div,.cal div{font-size:12px}</style></head><body>\n";
   h << "<h1>previz demo: the synthetic studio, end to end</h1>\n";
   h << "<p>" << o.witness_cameras << " witness cameras " << o.witness_width << "x" << o.witness_height << " + main "
     << o.main_width << "x" << o.main_height << ", " << frames.size()
-    << " frames over the 10 s choreography (the actor walks behind the CG pillar, then in front of it). "
-       "Rig: the take's own (truth/rig.json). Per frame: key &rarr; carve &rarr; main-view depth &rarr; composite.</p>\n";
+    << " frames over the 10 s choreography (the actor walks behind the CG pillar, then in front of it). ";
+  if (calibrated) {
+    h << "Rig: calibrated by previz from the board takes below (<a href=\"rig.json\">rig.json</a>); the main "
+         "camera's dolly motion comes from the take's camera-tracker file (<a href=\"tracked_main.jsonl\">"
+         "tracked_main.jsonl</a>: T_main0_main per frame, relative to where main stood during the rig take, "
+         "taken from the take's truth/main_poses.jsonl as a tracker would give it). ";
+  } else {
+    h << "Rig: the take's own (truth/rig.json; calibration skipped with --no-calibrate). ";
+  }
+  h << "Per frame: key &rarr; carve &rarr; main-view depth &rarr; composite.</p>\n";
   h << "<p><img src=\"contact_sheet.png\" style=\"width:60%\"></p>\n";
-  h << "<h2>Stage timings (mean wall ms a frame, this machine)</h2><table><tr><th>stage</th><th>ms</th></tr>\n";
+
+  h << "<h2>Composite against the true composite</h2><table><tr><th style=\"text-align:left\">rig</th>"
+       "<th>min PSNR dB</th><th>mean PSNR dB</th></tr>\n";
+  if (calibrated) {
+    h << "<tr><td style=\"text-align:left\">calibrated by previz, tracked main</td><td>" << num(calibrated->min_psnr_db, 2)
+      << "</td><td>" << num(calibrated->mean_psnr_db, 2) << "</td></tr>\n";
+  }
+  h << "<tr><td style=\"text-align:left\">true rig and main poses</td><td>" << num(truth.min_psnr_db, 2) << "</td><td>"
+    << num(truth.mean_psnr_db, 2) << "</td></tr></table>\n";
+  h << "<p>PSNR over the bounding box of the actor's true mask in the main view, 8-bit composite against "
+       "take/truth/composite (issue 7's measure; the target is &ge; 30 dB).</p>\n";
+
+  if (!cameras.empty()) {
+    h << "<h2>Camera calibration (intrinsics)</h2><p>Each camera filmed its own board take "
+         "(calib_takes/&lt;camera&gt;, intrinsics preset: a chessboard moved and tilted in front of it); previz "
+         "detected the board and solved fx fy cx cy k1 k2 p1 p2 k3 (skew held). Value &plusmn; 1&sigma; "
+         "(error against the take's truth/rig.json).</p>\n<table><tr><th style=\"text-align:left\">camera</th>"
+         "<th>views</th><th>RMS px</th>";
+    const int shown_params[] = {0, 1, 2, 3, 5, 6, 7, 8, 9};
+    for (int k : shown_params) h << "<th>" << calib::kIntrinsicNames[k] << "</th>";
+    h << "</tr>\n";
+    for (const CameraCalib& c : cameras) {
+      const Camera& e = c.result.camera;
+      const Camera& t = c.truth;
+      const double est[] = {e.fx, e.fy, e.cx, e.cy, e.skew, e.dist.k1, e.dist.k2, e.dist.p1, e.dist.p2, e.dist.k3};
+      const double tru[] = {t.fx, t.fy, t.cx, t.cy, t.skew, t.dist.k1, t.dist.k2, t.dist.p1, t.dist.p2, t.dist.k3};
+      h << "<tr><td style=\"text-align:left\"><a href=\"calib/" << c.camera << ".report.json\">" << c.camera
+        << "</a></td><td>" << c.result.views_used << "/" << c.views << "</td><td>" << num(c.result.rms_px, 3) << "</td>";
+      for (int k : shown_params) {
+        const int d = k < 4 ? 2 : 5;
+        h << "<td>" << num(est[k], d) << " &plusmn; " << num(c.result.sigma[k], d) << "<br><small>("
+          << (est[k] - tru[k] >= 0 ? "+" : "") << num(est[k] - tru[k], d) << ")</small></td>";
+      }
+      h << "</tr>\n";
+    }
+    h << "</table>\n<p>Per camera: residuals (magnified, outliers red) &middot; where the board's points fell "
+         "&middot; projection uncertainty &middot; per-view RMS.</p>\n";
+    for (const CameraCalib& c : cameras) {
+      h << "<h3>" << c.camera << "</h3><div class=\"cal\">";
+      for (const char* kind : {"residuals", "coverage", "uncertainty", "views"}) {
+        const std::string file = "calib/" + c.camera + "." + kind + ".png";
+        if (fs::exists(out / file)) h << "<div><a href=\"" << file << "\"><img src=\"" << file << "\"></a>" << kind << "</div>";
+      }
+      h << "</div>\n";
+    }
+  }
+
+  if (rig) {
+    const multicam::RigCalibResult& r = rig->result;
+    h << "<h2>Rig calibration</h2><p>Rig take (rig_take, rig preset): " << rig->frames << " frames, an AprilGrid waved "
+         "through the volume, then " << rig->floor_frames.size() << " frames of it on the floor (the world frame). "
+         "Detected in " << num(rig->detect_s, 1) << " s; solved with every camera's intrinsics held at the ones "
+         "above: RMS " << num(r.rms_px, 3) << " px over " << r.residuals << " residuals (" << r.rejected
+      << " rejected), world from floor: " << (r.world_from_floor ? "yes" : "no") << ". Error against the rig "
+         "take's truth/rig.json.</p>\n<table><tr><th style=\"text-align:left\">camera</th><th>views</th>"
+         "<th>RMS px</th><th>position error mm</th><th>rotation error deg</th><th>&sigma; position mm</th>"
+         "<th>&sigma; rotation deg</th></tr>\n";
+    for (size_t i = 0; i < r.rig.cameras.size(); ++i) {
+      const RigCamera& rc = r.rig.cameras[i];
+      const multicam::CameraCalibReport& cr = r.cameras[i];
+      const Pose& T_true = rig->truth.at(rc.camera.name).T_world_cam;
+      h << "<tr><td style=\"text-align:left\">" << rc.camera.name << "</td><td>" << cr.views << "</td><td>"
+        << num(cr.rms_px, 3) << "</td><td>" << num(1e3 * translationDistance(rc.T_world_cam, T_true), 1)
+        << "</td><td>" << num(rotationDistance(rc.T_world_cam, T_true) * 180 / M_PI, 3) << "</td><td>"
+        << num(1e3 * cr.sigma_position_m, 1) << "</td><td>" << num(cr.sigma_rotation_deg, 3) << "</td></tr>\n";
+    }
+    h << "</table>\n<p><a href=\"rig.png\"><img src=\"rig.png\" style=\"width:80%\"></a></p>\n";
+  }
+
+  h << "<h2>Stage timings (mean wall ms a frame, this machine" << (calibrated ? ", calibrated rig" : "")
+    << ")</h2><table><tr><th>stage</th><th>ms</th></tr>\n";
   double total = 0;
-  for (const std::string& s : order) {
-    h << "<tr><td style=\"text-align:left\">" << s << "</td><td>" << mean[s] << "</td></tr>\n";
-    total += mean[s];
+  for (const std::string& st : order) {
+    h << "<tr><td style=\"text-align:left\">" << st << "</td><td>" << num(mean[st], 1) << "</td></tr>\n";
+    total += mean[st];
   }
-  h << "<tr><th style=\"text-align:left\">total</th><th>" << total << "</th></tr></table>\n";
+  h << "<tr><th style=\"text-align:left\">total</th><th>" << num(total, 1) << "</th></tr></table>\n";
   h << "<p>Target of the live loop: 20 ms a frame on 2 cores (see <code>previz bench run</code>).</p>\n";
-  h << "<h2>Frames</h2><p>composite (previz) &middot; true composite &middot; actor depth used (turbo, 2&ndash;12 m) "
-       "&middot; in front: green actor, red CG, magenta fallback (no depth)</p>\n";
-  for (int f : frames) {
-    const std::string s = stem(f);
+  h << "<h2>Frames</h2><p>composite (previz" << (calibrated ? ", calibrated rig" : "") << ") &middot; "
+    << (calibrated ? "composite with the true rig &middot; " : "") << "true composite &middot; actor depth used "
+       "(turbo, 2&ndash;12 m) &middot; in front: green actor, red CG, magenta fallback (no depth)</p>\n";
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const std::string st = stem(frames[i]);
     h << "<div class=\"row\">"
-      << "<div><img src=\"run/composite/" << s << ".png\">frame " << f << "</div>"
-      << "<div><img src=\"take/truth/composite/" << s << ".png\">truth</div>"
-      << "<div><img src=\"run/layers/actor_depth/" << s << ".png\">actor depth</div>"
-      << "<div><img src=\"run/layers/front/" << s << ".png\">front</div></div>\n";
+      << "<div><img src=\"" << shown_dir << "/composite/" << st << ".png\">frame " << frames[i] << ", "
+      << num(shown.psnr_db[i], 2) << " dB</div>";
+    if (calibrated) {
+      h << "<div><img src=\"run_true/composite/" << st << ".png\">true rig, " << num(truth.psnr_db[i], 2) << " dB</div>";
+    }
+    h << "<div><img src=\"take/truth/composite/" << st << ".png\">truth</div>"
+      << "<div><img src=\"" << shown_dir << "/layers/actor_depth/" << st << ".png\">actor depth</div>"
+      << "<div><img src=\"" << shown_dir << "/layers/front/" << st << ".png\">front</div></div>\n";
   }
-  h << "<p>Video: <a href=\"run/composite.avi\">run/composite.avi</a>. Files: docs/formats.md.</p></body></html>\n";
+  h << "<p>Video: <a href=\"" << shown_dir << "/composite.avi\">" << shown_dir
+    << "/composite.avi</a>. Files: docs/formats.md.</p></body></html>\n";
   writeFileAtomic(out / "report.html", h.str());
 }
 
@@ -192,12 +472,16 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const std:
 Runner addDemoCommand(CLI::App& app) {
   auto a = std::make_shared<DemoArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "demo", "Render the built-in synthetic studio, run the live frame over it, write a report page (README command 1)");
+      "demo", "Render the built-in synthetic studio, calibrate its cameras and rig, run the live frame over it, write a report page (README command 1)");
   cmd->add_option("--out", a->out, "Output folder (the take goes to OUT/take)")->capture_default_str();
   cmd->add_option("--frames", a->frames, "Frames to render")->capture_default_str();
   cmd->add_option("--cams", a->cams, "Witness cameras")->capture_default_str();
   cmd->add_option("--size", a->size, "Witness size WxH (default 1280x720; main scales with it)");
   cmd->add_option("--seed", a->seed, "Random seed")->capture_default_str();
+  cmd->add_option("--views", a->views, "Intrinsics board views rendered per camera")->capture_default_str();
+  cmd->add_option("--rig-frames", a->rig_frames, "Frames of the rig take (the last few show the floor board)")
+      ->capture_default_str();
+  cmd->add_flag("--no-calibrate", a->no_calibrate, "Skip the calibration: run on the take's true rig only (quick look)");
   cmd->add_flag("--json", a->json, "JSON summary on stdout");
   cmd->add_flag("--quiet", a->quiet, "No progress line");
 
@@ -219,6 +503,16 @@ Runner addDemoCommand(CLI::App& app) {
       o.witness_height = h;
     }
     o.validate();
+    if (!a->no_calibrate && a->views < 3) {
+      ErrorContext context;
+      context.field = "--views";
+      throw Error("demo: --views must be >= 3 (got " + std::to_string(a->views) + ")", context);
+    }
+    if (!a->no_calibrate && a->rig_frames < 10) {
+      ErrorContext context;
+      context.field = "--rig-frames";
+      throw Error("demo: --rig-frames must be >= 10 (got " + std::to_string(a->rig_frames) + ")", context);
+    }
     const fs::path out(a->out);
     const fs::path take = out / "take";
     std::cerr << "demo: rendering the synthetic studio (" << o.witness_cameras << " witness "
@@ -232,22 +526,62 @@ Runner addDemoCommand(CLI::App& app) {
     const int frame = o.frames / 2;
     const fs::path sheet_path = out / "contact_sheet.png";
     writeImageAtomic(sheet_path, contactSheet(take, rig, frame));
-    std::cerr << "demo: running the live frame over the take (key, carve, depth, composite) into " << out / "run" << "\n";
-    const std::vector<std::vector<StageTime>> times = runTake(take, out / "run", a->quiet);
+
+    std::vector<CameraCalib> cameras;
+    std::optional<RigCalib> rig_calib;
+    std::optional<RunResult> calibrated;
+    if (!a->no_calibrate) {
+      std::cerr << "demo: [1/4] calibrating " << rig.cameras.size() << " cameras' intrinsics, " << a->views
+                << " board views each, into " << out / "calib" << "\n";
+      cameras = calibrateCameras(o, rig, a->views, out, a->quiet);
+      std::cerr << "demo: [2/4] calibrating the rig from a " << a->rig_frames << "-frame rig take\n";
+      rig_calib = calibrateRigTake(o, cameras, a->rig_frames, out, a->quiet);
+      writeTrackedMain(take, rig_calib->truth.at(rig.cameras.back().camera.name).T_world_cam,
+                       out / "tracked_main.jsonl");
+      std::cerr << "demo: [3/4] running the live frame over the take with the calibrated rig into " << out / "run" << "\n";
+      calibrated = runTake(take, out / "rig.json", out / "tracked_main.jsonl", out / "run", true, "demo run", a->quiet);
+    }
+    std::cerr << "demo: [4/4] running the live frame over the take with the true rig into " << out / "run_true" << "\n";
+    const RunResult truth = runTake(take, take / "truth" / "rig.json", "", out / "run_true", a->no_calibrate,
+                                    "demo run (true rig)", a->quiet);
     std::vector<int> frames;
     for (int f = 0; f < o.frames; ++f) frames.push_back(f);
-    writeReport(out, frames, times, o);
-    const nlohmann::json summary = {{"command", "demo"},
-                                    {"take", take.string()},
-                                    {"frames", s.frames},
-                                    {"cameras", s.cameras},
-                                    {"render_ms", s.render_ms},
-                                    {"ms_per_camera_frame", s.ms_per_camera_frame},
-                                    {"contact_sheet", sheet_path.string()},
-                                    {"report", (out / "report.html").string()}};
+    writeReport(out, frames, o, cameras, rig_calib, calibrated, truth);
+    nlohmann::json summary = {{"command", "demo"},
+                              {"take", take.string()},
+                              {"frames", s.frames},
+                              {"cameras", s.cameras},
+                              {"render_ms", s.render_ms},
+                              {"ms_per_camera_frame", s.ms_per_camera_frame},
+                              {"contact_sheet", sheet_path.string()},
+                              {"report", (out / "report.html").string()},
+                              {"psnr_true_rig", {{"min_db", truth.min_psnr_db}, {"mean_db", truth.mean_psnr_db}}}};
+    if (calibrated) {
+      summary["psnr_calibrated_rig"] = {{"min_db", calibrated->min_psnr_db}, {"mean_db", calibrated->mean_psnr_db}};
+      nlohmann::json intrinsics = nlohmann::json::array();
+      for (const CameraCalib& c : cameras) {
+        intrinsics.push_back({{"camera", c.camera},
+                              {"views_used", c.result.views_used},
+                              {"rms_px", c.result.rms_px},
+                              {"fx_error_px", c.result.camera.fx - c.truth.fx},
+                              {"cx_error_px", c.result.camera.cx - c.truth.cx},
+                              {"cy_error_px", c.result.camera.cy - c.truth.cy},
+                              {"k1_error", c.result.camera.dist.k1 - c.truth.dist.k1}});
+      }
+      summary["intrinsics"] = intrinsics;
+      nlohmann::json rig_cams = nlohmann::json::array();
+      for (const RigCamera& rc : rig_calib->result.rig.cameras) {
+        const Pose& T_true = rig_calib->truth.at(rc.camera.name).T_world_cam;
+        rig_cams.push_back({{"camera", rc.camera.name},
+                            {"position_error_m", translationDistance(rc.T_world_cam, T_true)},
+                            {"rotation_error_deg", rotationDistance(rc.T_world_cam, T_true) * 180 / M_PI}});
+      }
+      summary["rig"] = {{"rms_px", rig_calib->result.rms_px}, {"rig", (out / "rig.json").string()}, {"cameras", rig_cams}};
+    }
     writeJsonAtomic(out / "summary.json", summary);
-    std::cerr << "demo: take in " << take << ", contact sheet " << sheet_path << " (frame " << frame
-              << "), " << s.ms_per_camera_frame << " ms per camera-frame; report " << out / "report.html" << "\n";
+    std::cerr << "demo: take in " << take << ", contact sheet " << sheet_path << " (frame " << frame << "); composite PSNR over the actor: "
+              << (calibrated ? "calibrated rig min " + num(calibrated->min_psnr_db, 2) + " dB, " : std::string())
+              << "true rig min " << num(truth.min_psnr_db, 2) << " dB; report " << out / "report.html" << "\n";
     if (a->json) std::cout << summary.dump() << "\n";
     return 0;
   };

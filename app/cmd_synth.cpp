@@ -132,7 +132,7 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_option("--fps", o.fps, "Frame rate of the take")->capture_default_str();
   cmd->add_option("--board", o.board, "Board for intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree")
       ->capture_default_str();
-  cmd->add_option("--camera", o.camera, "Intrinsics preset: camera to film (main|witness)")
+  cmd->add_option("--camera", o.camera, "Intrinsics preset: camera to film (main|witness|witness01..witnessNN)")
       ->capture_default_str();
   cmd->add_option("--overscan", o.cg_overscan, "CG render overscan fraction")->capture_default_str();
   cmd->add_option("--threads", o.threads, "OpenMP threads (0 = all cores)")->capture_default_str();

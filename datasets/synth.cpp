@@ -242,8 +242,10 @@ void SynthOptions::validate() const {
     badOption("cg_overscan", "must be in [0, 1] (got " + str(cg_overscan) + ")");
   }
   boardTypeFromString(board);
-  if (camera != "main" && camera != "witness") {
-    badOption("camera", "must be main|witness (got '" + camera + "')");
+  bool known_camera = camera == "main" || camera == "witness";
+  for (int i = 0; i < witness_cameras && !known_camera; ++i) known_camera = camera == witnessName(i);
+  if (!known_camera) {
+    badOption("camera", "must be main|witness|witness01.." + witnessName(witness_cameras - 1) + " (got '" + camera + "')");
   }
   if (threads < 0) badOption("threads", "must be >= 0 (got " + str(threads) + ")");
   // Rig preset only: a knocked or late camera, another board path, no floor board.
@@ -310,7 +312,9 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   Rig full_rig = studioRig(rig_options, config.take_duration_s, dolly);
   Rig rig;
   if (o.preset == Preset::kIntrinsics) {
-    rig.cameras.push_back(o.camera == "main" ? full_rig.cameras.back() : full_rig.cameras.front());
+    // "witness" is witness01; a witness name picks that witness (its own lens and pose).
+    const std::string name = o.camera == "witness" ? witnessName(0) : o.camera;
+    rig.cameras.push_back(full_rig.at(name));
   } else {
     rig = full_rig;
   }

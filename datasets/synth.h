@@ -36,7 +36,7 @@ struct SynthOptions {
   bool main_dolly = true;        // main camera moves along its dolly path (else fixed)
   double cg_overscan = 0.1;      // CG render of the main camera: extra fraction each way
   std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree
-  std::string camera = "main";   // intrinsics preset: which camera ("main" or "witness")
+  std::string camera = "main";   // intrinsics preset: "main", "witness" (= witness01) or a witness name
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
   int threads = 0;               // OpenMP threads (0 = default)
   // Rig preset only (datasets/rig_capture.h RigCaptureOptions has the same meanings):

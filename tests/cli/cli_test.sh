@@ -11,6 +11,12 @@ expect_fail "unknown command fails" "nosuch|not expected|Extras" "$bin" nosuch
 expect_fail "frames 0 names the field" "frames" "$bin" synth --out "$tmp/x" --frames 0 --quiet
 expect_fail "bad size names the flag" "--size" "$bin" synth --out "$tmp/x" --size 0x5 --quiet
 expect_fail "unknown board names the field" "board" "$bin" synth --preset intrinsics --board nosuch --out "$tmp/x" --quiet
+expect_fail "unknown intrinsics camera names the field" "camera" "$bin" synth --preset intrinsics --camera witness04 --cams 3 --out "$tmp/x" --quiet
+if "$bin" synth --preset intrinsics --camera witness03 --cams 3 --frames 1 --size 160x90 --out "$tmp/intr3" --quiet >/dev/null 2>&1 \
+   && [ -s "$tmp/intr3/cams/witness03/000000.png" ] && grep -q '"witness03"' "$tmp/intr3/truth/rig.json" \
+   && ! grep -q '"witness01"' "$tmp/intr3/truth/rig.json"; then
+  ok "synth intrinsics films the witness --camera names"
+else fail "synth intrinsics --camera witness03"; fi
 printf '{"units": "m", "cameras": [ {"name": "a", "width": 10' > "$tmp/broken.json"
 expect_fail "malformed rig names the file" "broken.json" "$bin" camera info --rig "$tmp/broken.json"
 printf 'cam0 1 2 3\n' > "$tmp/short.txt"
@@ -60,8 +66,28 @@ else
   fail "real data missing: $par"
 fi
 
-if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run/composite/000001.png" ]; then
-  ok "demo writes a contact sheet, the composites and the report page"
-else fail "demo"; fi
+if "$bin" demo --out "$tmp/demo" --frames 2 --cams 3 --size 160x90 --no-calibrate --quiet >/dev/null 2>&1 && [ -s "$tmp/demo/contact_sheet.png" ] && [ -s "$tmp/demo/report.html" ] && [ -s "$tmp/demo/run_true/composite/000001.png" ]; then
+  ok "demo --no-calibrate writes a contact sheet, the composites and the report page"
+else fail "demo --no-calibrate"; fi
+# Every src/href of a report page is relative and exists.
+links_ok() {
+  local dir="$1" ref
+  for ref in $(grep -o -E '(src|href)="[^"]+"' "$dir/report.html" | sed -E 's/^(src|href)="//; s/"$//'); do
+    case "$ref" in /*|*://*) return 1 ;; esac
+    [ -e "$dir/$ref" ] || return 1
+  done
+}
+links_ok "$tmp/demo" && ok "demo --no-calibrate report links exist" || fail "demo --no-calibrate report links"
+# The calibrating path at the smallest setting found to work (the rig take's AprilGrid needs
+# ~960 px wide witnesses to decode, and 8 witnesses to chain every camera to the others): ~100 s.
+if "$bin" demo --out "$tmp/demo_cal" --frames 1 --cams 8 --size 960x540 --views 4 --rig-frames 24 --quiet >/dev/null 2>&1 \
+   && [ -s "$tmp/demo_cal/rig.json" ] && [ -s "$tmp/demo_cal/rig.png" ] && [ -s "$tmp/demo_cal/calib/main.residuals.png" ] \
+   && [ -s "$tmp/demo_cal/calib/witness08.report.json" ] && [ -s "$tmp/demo_cal/tracked_main.jsonl" ] \
+   && [ -s "$tmp/demo_cal/run/composite/000000.png" ] && [ -s "$tmp/demo_cal/run_true/composite/000000.png" ] \
+   && grep -q "Rig calibration" "$tmp/demo_cal/report.html" && links_ok "$tmp/demo_cal"; then
+  ok "demo calibrates the cameras and the rig, runs the take with it, report links exist"
+else fail "demo (calibrating)"; fi
+rm -rf "$tmp/demo_cal"
+expect_fail "demo --views 2 names the flag" "--views" "$bin" demo --out "$tmp/demo_bad" --frames 2 --cams 3 --size 160x90 --views 2 --quiet
 
 finish

@@ -19,6 +19,7 @@
 
 #include "app/frame_loop.h"
 #include "carving/take.h"
+#include "composite/measure.h"
 #include "composite/output.h"
 #include "core/io.h"
 #include "datasets/render.h"
@@ -96,15 +97,6 @@ struct TakeMeasure {
   double wrongFraction() const { return actor_px > 0 ? double(wrong_px) / actor_px : 0; }
 };
 
-inline double psnr(const cv::Mat& a, const cv::Mat& b) {
-  cv::Mat d;
-  cv::absdiff(a, b, d);
-  d.convertTo(d, CV_64F);
-  const cv::Scalar sq = cv::sum(d.mul(d));
-  const double mse = (sq[0] + sq[1] + sq[2] + sq[3]) / (double(d.total()) * d.channels());
-  return mse <= 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / mse);
-}
-
 // The CG set's depth through the main camera's real lens at the frame time, from the
 // renderer's pixel-centre rays (exact truth; not the compositor's map).
 inline cv::Mat trueCgDepth(const RigCamera& main_true, double time_s) {
@@ -156,8 +148,9 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
     const cv::Mat true_depth = readDepthExr(take_dir / "truth" / "depth" / "main" / (stem(f) + ".exr"));
     const RigCamera main_true = truth_take.cameraAt(loop.mainCamera(), f);
     const cv::Mat cg_depth = trueCgDepth(main_true, f / takeOptions().fps);
-    m.bbox = cv::boundingRect(mask);
-    m.psnr_db = m.bbox.area() > 0 ? psnr(s.composite.bgr(m.bbox), truth(m.bbox)) : 99.0;
+    const ActorPsnr actor_psnr = actorPsnr(s.composite.bgr, truth, mask);
+    m.bbox = actor_psnr.bbox;
+    m.psnr_db = actor_psnr.psnr_db;
     cv::Mat inner;  // pixels at least 2 px inside the true silhouette
     cv::erode(mask, inner, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
     cv::Mat outer;

@@ -2,7 +2,7 @@
 // camera's intrinsics from its own board take (intrinsics preset: detect, solve, calib report
 // pictures), calibrates the rig from a rig take (rig preset: board waved, then on the floor;
 // intrinsics held at the calibrated ones), runs the live frame (key -> carve -> main-view depth
-// -> composite, app/frame_loop.h) over the studio take with the calibrated rig (the main
+// -> track props -> composite, app/frame_loop.h) over the studio take with the calibrated rig (the main
 // camera's dolly motion from the take's tracker file, relative to where it stood during the rig
 // take) and, for comparison, with the take's true rig, and writes a report page (report.html):
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
@@ -38,6 +38,8 @@
 #include "multicam/observations.h"
 #include "multicam/rig_calib.h"
 #include "multicam/rig_picture.h"
+#include "tracking/props.h"
+#include "tracking/tracker.h"
 
 namespace previz::app {
 namespace {
@@ -283,7 +285,30 @@ struct RunResult {
   std::vector<std::vector<StageTime>> times;
   std::vector<double> psnr_db;  // per frame, over the actor's bounding box vs truth/composite
   double min_psnr_db = 99, mean_psnr_db = 0;
+  // The props stage (the take's props.json, as `previz run` tracks it): per tracked prop and
+  // frame, the position and rotation error against truth/props.jsonl.
+  int prop_frames = 0, prop_tracked = 0;
+  std::vector<double> prop_err_mm, prop_err_deg;
 };
+
+// truth/props.jsonl: frame -> prop id -> T_world_prop.
+std::map<int, std::map<int, Pose>> readTrueProps(const fs::path& file) {
+  std::map<int, std::map<int, Pose>> out;
+  if (!fs::exists(file)) return out;
+  std::ifstream in(file);
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty()) continue;
+    const nlohmann::json j = nlohmann::json::parse(line);
+    for (const auto& p : j.at("props")) out[j.at("frame").get<int>()][p.at("id").get<int>()] = poseFromJson(p.at("T_world_prop"));
+  }
+  return out;
+}
+
+double medianOf(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
 
 // Runs the live frame over the take with the rig at rig_path (tracked: the tracker's main poses,
 // empty = the take's true main poses) into 'out' and measures each composite against the truth.
@@ -300,6 +325,18 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
   TakeInputOptions io;
   io.tracked_main_poses = tracked;
   const TakeReader reader(take, loop, io);
+  std::unique_ptr<PropStage> props;
+  if (fs::exists(take_dir / "props.json")) {
+    tracking::PropSet set = tracking::readProps(take_dir / "props.json");
+    if (!set.props.empty()) {
+      PropStageOptions po;
+      po.fps = takeFps(take_dir);
+      props = std::make_unique<PropStage>(loop, take.rig(), std::move(set), po);
+      props->addTo(loop);
+    }
+  }
+  const auto true_props = readTrueProps(take_dir / "truth" / "props.jsonl");
+  std::string prop_lines;
   composite::OutputOptions oo;
   oo.out = out;
   oo.layers = layers;
@@ -315,6 +352,19 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
     reader.read(f, s);
     r.times.push_back(loop.run(s));
     writer.write(f, s.composite);
+    if (s.props) {
+      prop_lines += tracking::trackFrameToJson(*s.props).dump() + "\n";
+      for (const tracking::PropResult& p : s.props->props) {
+        ++r.prop_frames;
+        if (!p.tracked) continue;
+        ++r.prop_tracked;
+        const auto tf = true_props.find(f);
+        if (tf == true_props.end() || !tf->second.count(p.id)) continue;
+        const Pose& T = tf->second.at(p.id);
+        r.prop_err_mm.push_back(1000 * translationDistance(p.T_world_prop, T));
+        r.prop_err_deg.push_back(rotationDistance(p.T_world_prop, T) * 180 / 3.14159265358979323846);
+      }
+    }
     const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (stem(f) + ".png"), cv::IMREAD_COLOR);
     const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (stem(f) + ".png"), cv::IMREAD_GRAYSCALE);
     r.psnr_db.push_back(composite::actorPsnr(s.composite.bgr, truth, mask).psnr_db);
@@ -323,6 +373,10 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
     progress.update(static_cast<int>(r.times.size()));
   }
   writer.close();
+  if (props) {
+    fs::create_directories(out);
+    writeFileAtomic(out / "props.jsonl", prop_lines);
+  }
   if (!r.psnr_db.empty()) r.mean_psnr_db /= r.psnr_db.size();
   return r;
 }
@@ -367,7 +421,7 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
   } else {
     h << "Rig: the take's own (truth/rig.json; calibration skipped with --no-calibrate). ";
   }
-  h << "Per frame: key &rarr; carve &rarr; main-view depth &rarr; composite.</p>\n";
+  h << "Per frame: key &rarr; carve &rarr; main-view depth &rarr; track props &rarr; composite.</p>\n";
   h << "<p><img src=\"contact_sheet.png\" style=\"width:60%\"></p>\n";
 
   h << "<h2>Composite against the true composite</h2><table><tr><th style=\"text-align:left\">rig</th>"
@@ -380,6 +434,12 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
     << num(truth.mean_psnr_db, 2) << "</td></tr></table>\n";
   h << "<p>PSNR over the bounding box of the actor's true mask in the main view, 8-bit composite against "
        "take/truth/composite (issue 7's measure; the target is &ge; 30 dB).</p>\n";
+  if (shown.prop_frames > 0) {
+    h << "<h2>Tracked props</h2><p>The props stage (AprilTag-tagged crate, every camera, joint solve): tracked in "
+      << shown.prop_tracked << " of " << shown.prop_frames << " prop-frames; median error against the take's "
+      << "truth/props.jsonl " << num(medianOf(shown.prop_err_mm), 2) << " mm, " << num(medianOf(shown.prop_err_deg), 3)
+      << "&deg; (poses: <a href=\"" << shown_dir << "/props.jsonl\">" << shown_dir << "/props.jsonl</a>).</p>\n";
+  }
 
   if (!cameras.empty()) {
     h << "<h2>Camera calibration (intrinsics)</h2><p>Each camera filmed its own board take "
@@ -556,6 +616,13 @@ Runner addDemoCommand(CLI::App& app) {
                               {"contact_sheet", sheet_path.string()},
                               {"report", (out / "report.html").string()},
                               {"psnr_true_rig", {{"min_db", truth.min_psnr_db}, {"mean_db", truth.mean_psnr_db}}}};
+    {
+      const RunResult& shown = calibrated ? *calibrated : truth;
+      summary["props"] = {{"prop_frames", shown.prop_frames},
+                          {"tracked", shown.prop_tracked},
+                          {"median_position_error_mm", medianOf(shown.prop_err_mm)},
+                          {"median_rotation_error_deg", medianOf(shown.prop_err_deg)}};
+    }
     if (calibrated) {
       summary["psnr_calibrated_rig"] = {{"min_db", calibrated->min_psnr_db}, {"mean_db", calibrated->mean_psnr_db}};
       nlohmann::json intrinsics = nlohmann::json::array();

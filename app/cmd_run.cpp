@@ -119,14 +119,6 @@ std::optional<tracking::PropSet> runProps(const fs::path& take_dir, const LoopAr
   return set;
 }
 
-double takeFps(const fs::path& take_dir) {
-  const fs::path tj = take_dir / "take.json";
-  if (fs::exists(tj)) {
-    const nlohmann::json j = readJsonFile(tj);
-    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
-  }
-  return 24.0;
-}
 
 Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   Loaded l;

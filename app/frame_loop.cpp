@@ -9,6 +9,7 @@
 #include <cmath>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "core/error.h"
@@ -390,6 +391,15 @@ bool LiveReader::next(FrameState& s) {
   ++next_frame_;
   ++delivered_;
   return true;
+}
+
+double takeFps(const std::filesystem::path& take_dir) {
+  const std::filesystem::path tj = take_dir / "take.json";
+  if (std::filesystem::exists(tj)) {
+    const nlohmann::json j = readJsonFile(tj);
+    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
+  }
+  return 24.0;
 }
 
 }  // namespace previz::app

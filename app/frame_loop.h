@@ -117,6 +117,9 @@ struct PropStageOptions {
   void validate() const;  // throws Error naming the field
 };
 
+// The take's frame rate (take.json "fps"; 24 when absent): the props stage's clock.
+double takeFps(const std::filesystem::path& take_dir);
+
 class PropStage {
  public:
   // rig: the loop's rig (the main camera's lens as the loop uses it). Throws Error naming the

@@ -110,10 +110,10 @@ int runPlan(const BatchArgs& a) {
 
 // Shards whose ledger is not complete (missing, partial or corrupt frames).
 std::vector<int> unfinishedShards(const batch::Manifest& m) {
-  std::vector<int> todo;
+  std::vector<int> to_run;
   for (const batch::ShardPlan& s : m.shards)
-    if (!batch::checkShard(m, s.id).complete()) todo.push_back(s.id);
-  return todo;
+    if (!batch::checkShard(m, s.id).complete()) to_run.push_back(s.id);
+  return to_run;
 }
 
 bool schedulerActive(const std::string& state) {
@@ -189,31 +189,31 @@ int runSubmit(const BatchArgs& a, bool resume) {
     o.progress = [&](const batch::Progress& p) { printProgress(p, a.quiet); };
     backend = batch::makeLocalBackend(o);
   }
-  std::vector<int> todo = unfinishedShards(m);
+  std::vector<int> to_run = unfinishedShards(m);
   std::vector<int> active;
   if (use_slurm) {
     // Only what is missing: a shard the queue still runs (or will run) is left to it.
     const std::map<int, std::string> states = backend->schedulerStates(m);
     std::vector<int> keep;
-    for (int s : todo) {
+    for (int s : to_run) {
       const auto it = states.find(s);
       (it != states.end() && schedulerActive(it->second) ? active : keep).push_back(s);
     }
-    todo = keep;
+    to_run = keep;
   }
   const char* verb = resume ? "batch resume" : "batch submit";
-  nlohmann::json j = {{"command", verb}, {"backend", backend->name()}, {"shards", todo},
+  nlohmann::json j = {{"command", verb}, {"backend", backend->name()}, {"shards", to_run},
                       {"still_queued", active}, {"job_id", ""}};
-  if (todo.empty()) {
+  if (to_run.empty()) {
     std::cerr << verb << ": nothing to do (" << m.shards.size() - active.size() << " shards finished"
               << (active.empty() ? "" : ", " + std::to_string(active.size()) + " still queued") << ")\n";
   } else {
-    std::cerr << verb << ": " << todo.size() << " of " << m.shards.size() << " shards ("
-              << batch::arrayList(todo) << ") on " << backend->name()
+    std::cerr << verb << ": " << to_run.size() << " of " << m.shards.size() << " shards ("
+              << batch::arrayList(to_run) << ") on " << backend->name()
               << (use_slurm ? "" : " with " + std::to_string(a.jobs) + " jobs") << "\n";
-    const batch::Submission sub = backend->submit(m, todo);
+    const batch::Submission sub = backend->submit(m, to_run);
     j["job_id"] = sub.job_id;
-    if (use_slurm) std::cerr << verb << ": Slurm job " << sub.job_id << " (array " << batch::arrayList(todo) << ")\n";
+    if (use_slurm) std::cerr << verb << ": Slurm job " << sub.job_id << " (array " << batch::arrayList(to_run) << ")\n";
   }
   if (use_slurm && a.wait) waitForSlurm(*backend, m, a);
   int unfinished = 0;

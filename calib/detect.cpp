@@ -187,14 +187,14 @@ std::vector<bool> fitPatterns(const DetectInput& input, std::vector<cv::Point2f>
                               const std::vector<Eigen::Matrix3d>& H_px_board,
                               const std::vector<LocalPattern>& patterns,
                               const std::vector<LineBending>& bending,
-                              const std::vector<bool>& todo) {
+                              const std::vector<bool>& to_fit) {
   std::vector<bool> fitted(points.size(), false);
   if (!input.options().model_fit) return fitted;
   PatternFitOptions options;
   options.max_radius_px = kPatternFitRadiusPx;
   options.srgb = input.options().linear_light;
   for (size_t k = 0; k < points.size(); ++k) {
-    if (!todo[k]) continue;
+    if (!to_fit[k]) continue;
     // Move the homography onto the point: a translation in the image.
     const Eigen::Vector2d at = (H_px_board[k] * Eigen::Vector3d(0, 0, 1)).hnormalized();
     Eigen::Matrix3d shift = Eigen::Matrix3d::Identity();

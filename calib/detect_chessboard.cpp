@@ -45,7 +45,7 @@ void fitChessboardCorners(const DetectInput& input, const BoardSpec& board,
   std::vector<Eigen::Matrix3d> H(pts.size(), Eigen::Matrix3d::Identity());
   std::vector<LocalPattern> patterns(pts.size());
   std::vector<LineBending> bending(pts.size());
-  std::vector<bool> todo = ok;
+  std::vector<bool> to_fit = ok;
   for (size_t k = 0; k < pts.size(); ++k) {
     if (!ok[k]) continue;
     const int i = lattice[k].x(), j = lattice[k].y();
@@ -70,14 +70,14 @@ void fitChessboardCorners(const DetectInput& input, const BoardSpec& board,
     bending[k].along_x = bendLine(along[0][0], -s, here, along[0][1], s);
     bending[k].along_y = bendLine(along[1][0], -s, here, along[1][1], s);
     if (!fitGridHomography(from, to, H[k])) {
-      todo[k] = false;
+      to_fit[k] = false;
       continue;
     }
     // Black squares: (row + column) even (core/board.h, studio_board.cpp).
     patterns[k] = chessboardCornerPattern(board.square_m, cr.y(), cr.x(),
                                           [](int sr, int sc) { return (sr + sc) % 2 == 0; });
   }
-  fitPatterns(input, pts, H, patterns, bending, todo);
+  fitPatterns(input, pts, H, patterns, bending, to_fit);
 }
 
 }  // namespace

@@ -77,7 +77,7 @@ double imageEdgeSigma(const DetectInput& input, const std::vector<cv::Point2f>& 
 std::vector<bool> refineCorners(const DetectInput& input, std::vector<cv::Point2f>& points,
                                 const std::vector<RefineWindow>& windows);
 
-// Model-based refinement (pattern_fit.h) after cornerSubPix, for the points marked in `todo`,
+// Model-based refinement (pattern_fit.h) after cornerSubPix, for the points marked in `to_fit`,
 // when options().model_fit: point k is fitted with patterns[k] seen through H_px_board[k] (board
 // metres relative to the point -> pixels; only its shape is used, it is moved onto points[k]
 // first) with its lines bent by bending[k], over the pixels within kPatternFitRadiusPx that are
@@ -90,7 +90,7 @@ std::vector<bool> fitPatterns(const DetectInput& input, std::vector<cv::Point2f>
                               const std::vector<Eigen::Matrix3d>& H_px_board,
                               const std::vector<LocalPattern>& patterns,
                               const std::vector<LineBending>& bending,
-                              const std::vector<bool>& todo);
+                              const std::vector<bool>& to_fit);
 
 // One line of a LineBending: the point and its neighbours before_m and after_m along the line
 // (null: missing).

@@ -28,7 +28,7 @@ namespace fs = std::filesystem;
 struct BatchArgs {
   // plan
   std::vector<std::string> takes;
-  std::string rig, props, main_poses, quality = "preview", out;
+  std::string rig, props, main_poses, quality = "preview", depth_cameras = "all", out;
   double voxel_m = 0, point_spacing_m = -1;
   int frames_per_shard = 0, shards_per_take = 0, threads = 0;
   bool force = false;
@@ -65,6 +65,7 @@ int runPlan(const BatchArgs& a) {
   o.props = a.props;
   o.main_poses = a.main_poses;
   o.quality = a.quality;
+  o.depth_cameras = a.depth_cameras;
   o.voxel_m = a.voxel_m;
   o.point_spacing_m = a.point_spacing_m;
   o.frames_per_shard = a.frames_per_shard;
@@ -354,6 +355,9 @@ Runner addBatchCommand(CLI::App& app) {
   plan->add_option("--frames-per-shard", a->frames_per_shard, "Frames per shard (default: the quality's)");
   plan->add_option("--shards-per-take", a->shards_per_take, "Shards per take (overrides --frames-per-shard)");
   plan->add_option("--threads", a->threads, "Threads of each stage command (0 = the task's cores)")
+      ->capture_default_str();
+  plan->add_option("--depth-cameras", a->depth_cameras,
+                   "Cameras besides the main one with depth sequences: all | main (none more) | a,b,c")
       ->capture_default_str();
   plan->add_option("--out", a->out, "Job folder")->required();
   plan->add_flag("--force", a->force, "Replace a different plan in --out (its outputs are removed)");

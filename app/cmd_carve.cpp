@@ -17,7 +17,7 @@ namespace {
 
 struct CarveArgs {
   std::string take, rig, out, masks, main_poses;
-  std::string frames, shard = "0/1", volume, depth_camera, cameras;
+  std::string frames, shard = "0/1", volume, depth_camera, depth_cameras, cameras;
   double voxel_m = 0.005;
   int k = 0;
   int min_views = 2;
@@ -83,17 +83,24 @@ int runCarve(const CarveArgs& a) {
   o.validate();
 
   const carving::Take take({a.take, a.rig, a.masks, a.main_poses});
+  if (a.depth_cameras == "all") {
+    for (const RigCamera& rc : take.rig().cameras) o.extra_depth_cameras.push_back(rc.camera.name);
+  } else {
+    o.extra_depth_cameras = splitNames(a.depth_cameras);
+  }
   carving::CarveJob job(take, o);
   const std::vector<int> selected = job.selectedFrames();
-  int todo = 0;
-  for (int f : selected) todo += job.finished(f) ? 0 : 1;
+  int to_carve = 0;
+  for (int f : selected) to_carve += job.finished(f) ? 0 : 1;
   if (!a.quiet) {
-    std::cerr << "carve: " << selected.size() << " frames selected (" << selected.size() - todo
+    std::cerr << "carve: " << selected.size() << " frames selected (" << selected.size() - to_carve
               << " already finished), " << job.carveCameras().size() << " carving cameras ("
               << take.rigFormat() << (take.hasMasks() ? ", masks" : ", keyed") << "), depth for "
-              << (job.depthCamera().empty() ? std::string("no camera") : job.depthCamera()) << "\n";
+              << (job.depthCamera().empty() ? std::string("no camera") : job.depthCamera());
+    for (const std::string& name : job.extraDepthCameras()) std::cerr << ", " << name;
+    std::cerr << "\n";
   }
-  ProgressLine progress("carve", todo, a.quiet);
+  ProgressLine progress("carve", to_carve, a.quiet);
   const carving::RunSummary s = job.run([&](int done, int) { progress.update(done); });
 
   nlohmann::json dropped = nlohmann::json::array();
@@ -121,6 +128,7 @@ int runCarve(const CarveArgs& a) {
                         {"failed", failed},
                         {"dropped", dropped},
                         {"depth_camera", job.depthCamera()},
+                        {"extra_depth_cameras", job.extraDepthCameras()},
                         {"refine", o.refine_depth},
                         {"carve_cameras", job.carveCameras()},
                         {"ms", s.ms},
@@ -159,6 +167,9 @@ Runner addCarveCommand(CLI::App& app) {
                   "JSON lines {frame, T_world_cam} of a moving main camera (e.g. truth/main_poses.jsonl)");
   cmd->add_option("--depth-camera", a->depth_camera,
                   "Camera to write depth for (default: the rig's main camera)");
+  cmd->add_option("--depth-cameras", a->depth_cameras,
+                  "Also write hull depth for cameras a,b,c (or 'all': every rig camera) in "
+                  "depth_cameras/<cam>/");
   cmd->add_option("--cameras", a->cameras, "Carving cameras a,b,c (default: every witness)");
   cmd->add_flag("--depth-everywhere", a->depth_everywhere,
                 "Depth wherever a ray meets the hull, not only inside the depth camera's silhouette");

@@ -228,11 +228,21 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
       copyAtomic(carve / "points" / (stem + ".ply"), td / pts);
       nlohmann::json entry = {{"frame", out_frame}, {"take_frame", f}, {"obj", obj}, {"ply", ply},
                               {"pcd", pcd}, {"points_ply", pts}};
-      std::string exr;
+      // Depth sequences per camera: depth/<cam>/<cam>.####.exr (the main camera's first).
+      std::string depth_links;
       if (!take.main_camera.empty()) {
-        exr = "depth/" + take.main_camera + "/" + sequenceName(take.main_camera, out_frame, "exr");
-        copyAtomic(carve / "depth" / (stem + ".exr"), td / exr);
-        entry["depth"] = {{take.main_camera, exr}};
+        entry["depth"] = nlohmann::json::object();
+        std::vector<std::pair<std::string, fs::path>> sources = {
+            {take.main_camera, carve / "depth" / (stem + ".exr")}};
+        for (const std::string& cam : take.depth_cameras)
+          sources.push_back({cam, carve / "depth_cameras" / cam / (stem + ".exr")});
+        for (const auto& [cam, source] : sources) {
+          const std::string exr = "depth/" + cam + "/" + sequenceName(cam, out_frame, "exr");
+          copyAtomic(source, td / exr);
+          entry["depth"][cam] = exr;
+          depth_links += std::string(depth_links.empty() ? "" : " ") + "<a href=\"" +
+                         htmlEscape(take.name + "/" + exr) + "\">" + htmlEscape(cam) + "</a>";
+        }
         previews.push_back({f, carve / "depth" / (stem + ".png")});
       } else {
         previews.push_back({f, fs::path()});
@@ -260,7 +270,7 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
       rows += "<tr><td>" + std::to_string(out_frame) + "</td><td><a href=\"" + htmlEscape(take.name + "/" + obj) +
               "\">obj</a> <a href=\"" + htmlEscape(take.name + "/" + ply) + "\">ply</a></td><td><a href=\"" +
               htmlEscape(take.name + "/" + pcd) + "\">pcd</a></td><td>" +
-              (exr.empty() ? std::string("-") : "<a href=\"" + htmlEscape(take.name + "/" + exr) + "\">exr</a>") +
+              (depth_links.empty() ? std::string("-") : depth_links) +
               "</td><td>" + std::to_string(entry["mesh_vertices"].get<long long>()) + "</td><td>" +
               std::to_string(entry["mesh_faces"].get<long long>()) + "</td><td>" +
               fixed(entry["volume_m3"].get<double>(), 4) + "</td><td>" +
@@ -358,7 +368,7 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
                   " of " + std::to_string(take.frames.size()) + " frames; source <code>" +
                   htmlEscape(take.dir.string()) + "</code></p>\n<img src=\"" + htmlEscape(take.name + "/" + sheet) +
                   "\" alt=\"contact sheet of " + htmlEscape(take.name) + "\">\n<ul>\n" + anim_links +
-                  "</ul>\n<table>\n<tr><th>frame</th><th>mesh</th><th>points</th><th>depth</th>"
+                  "</ul>\n<table>\n<tr><th>frame</th><th>mesh</th><th>points</th><th>depth EXR</th>"
                   "<th>vertices</th><th>faces</th><th>volume m&sup3;</th><th>cameras dropped</th></tr>\n" +
                   rows + "</table></section>\n";
   }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <sstream>
 
 #include "batch/hash.h"
 #include "core/error.h"
@@ -100,9 +101,19 @@ StagePlan carveStage(const Manifest& m, const TakePlan& take) {
     s.command.push_back("--main-poses");
     s.command.push_back(take.main_poses.string());
   }
+  if (!take.depth_cameras.empty()) {
+    std::string list;
+    for (const std::string& name : take.depth_cameras) list += (list.empty() ? "" : ",") + name;
+    s.command.push_back("--depth-cameras");
+    s.command.push_back(list);
+  }
   if (!take.main_camera.empty()) {
     s.outputs.push_back(out + "/depth/{frame}.exr");
     s.outputs.push_back(out + "/depth/{frame}.png");
+  }
+  for (const std::string& name : take.depth_cameras) {
+    s.outputs.push_back(out + "/depth_cameras/" + name + "/{frame}.exr");
+    s.outputs.push_back(out + "/depth_cameras/" + name + "/{frame}.png");
   }
   for (const char* f : {"/mesh/{frame}.ply", "/mesh/{frame}.obj", "/points/{frame}.ply",
                         "/points/{frame}.pcd", "/report/{frame}.json"})
@@ -190,7 +201,7 @@ nlohmann::json Manifest::toJson() const {
       stages.push_back({{"name", s.name}, {"command", s.command}, {"outputs", s.outputs}});
     takes_json.push_back({{"name", t.name}, {"dir", t.dir.string()}, {"frames", t.frames},
                           {"main_poses", t.main_poses.string()}, {"main_camera", t.main_camera},
-                          {"work", t.work.string()}, {"stages", stages}});
+                          {"depth_cameras", t.depth_cameras}, {"work", t.work.string()}, {"stages", stages}});
   }
   nlohmann::json shards_json = nlohmann::json::array();
   for (const ShardPlan& s : shards) {
@@ -244,9 +255,36 @@ Manifest planBatch(const PlanOptions& options) {
                 {"frames_per_shard", per_shard},
                 {"shards_per_take", options.shards_per_take},
                 {"threads", options.threads},
+                {"depth_cameras", options.depth_cameras},
                 {"stages", m.props.empty() ? nlohmann::json{"carve"} : nlohmann::json{"carve", "track"}}};
 
   const Rig rig = readRig(m.rig);
+  std::vector<std::string> depth_cameras;  // besides the main camera
+  {
+    std::vector<std::string> named;
+    if (options.depth_cameras == "all") {
+      for (const RigCamera& rc : rig.cameras) named.push_back(rc.camera.name);
+    } else if (options.depth_cameras != "main") {
+      std::stringstream in(options.depth_cameras);
+      for (std::string name; std::getline(in, name, ',');) {
+        if (name.empty()) continue;
+        bool known = false;
+        for (const RigCamera& rc : rig.cameras) known = known || rc.camera.name == name;
+        if (!known)
+          throw Error("batch plan: depth camera '" + name + "' is not in the rig",
+                      fieldContext("--depth-cameras"));
+        named.push_back(name);
+      }
+    }
+    for (const std::string& name : named) {
+      const RigCamera* rc = nullptr;
+      for (const RigCamera& c : rig.cameras)
+        if (c.camera.name == name) rc = &c;
+      if (rc->role != "main" &&
+          std::find(depth_cameras.begin(), depth_cameras.end(), name) == depth_cameras.end())
+        depth_cameras.push_back(name);
+    }
+  }
   std::vector<fs::path> input_files = {m.rig};
   if (!m.props.empty()) input_files.push_back(m.props);
   if (!options.main_poses.empty()) input_files.push_back(fs::absolute(options.main_poses).lexically_normal());
@@ -268,6 +306,7 @@ Manifest planBatch(const PlanOptions& options) {
       throw Error("no frames: expected cams/<camera>/%06d.png for the rig's cameras", fileContext(t.dir));
     for (const RigCamera& rc : rig.cameras)
       if (rc.role == "main") t.main_camera = rc.camera.name;
+    if (!t.main_camera.empty()) t.depth_cameras = depth_cameras;
     if (!options.main_poses.empty()) {
       t.main_poses = fs::absolute(options.main_poses).lexically_normal();
     } else if (fs::is_regular_file(t.dir / "truth" / "main_poses.jsonl", ec)) {
@@ -348,6 +387,7 @@ Manifest manifestFromJson(const nlohmann::json& j, const std::string& file) {
       t.frames = tj.at("frames").get<std::vector<int>>();
       t.main_poses = tj.at("main_poses").get<std::string>();
       t.main_camera = tj.at("main_camera").get<std::string>();
+      t.depth_cameras = tj.value("depth_cameras", std::vector<std::string>{});
       t.work = tj.at("work").get<std::string>();
       for (const auto& sj : tj.at("stages"))
         t.stages.push_back({sj.at("name").get<std::string>(),

@@ -25,6 +25,9 @@ struct PlanOptions {
   int frames_per_shard = 0;         // 0 = the quality's
   int shards_per_take = 0;          // > 0 overrides frames_per_shard
   int threads = 0;                  // carve --threads in each task (0 = the task's cores)
+  // Cameras besides the main one whose hull depth sequence is written (carve --depth-cameras):
+  // "all" = every rig camera, "main" = none more, or names a,b,c.
+  std::string depth_cameras = "all";
   std::filesystem::path out;        // JOBDIR
   std::filesystem::path previz;     // the previz executable tasks run (absolute)
   void validate() const;            // throws Error naming the field
@@ -45,6 +48,7 @@ struct TakePlan {
   std::vector<int> frames;            // ascending
   std::filesystem::path main_poses;   // "" = the rig's static pose
   std::string main_camera;            // rig camera with role "main" ("" = none: no depth)
+  std::vector<std::string> depth_cameras;  // more cameras with depth (none without a main one)
   std::filesystem::path work;         // JOBDIR-relative folder of the stages' outputs
   std::vector<StagePlan> stages;
 };

@@ -164,10 +164,17 @@ void RunOptions::validate() const {
   if (refine_depth) refine.validate();
 }
 
+nlohmann::json DepthReport::toJson() const {
+  return {{"camera", camera}, {"silhouette", silhouette}, {"pixels", pixels}, {"min_m", min_m},
+          {"max_m", max_m}};
+}
+
 nlohmann::json FrameReport::toJson() const {
   nlohmann::json dropped = nlohmann::json::array();
   for (const DroppedCamera& d : cameras_dropped)
     dropped.push_back({{"camera", d.camera}, {"frame", frame}, {"reason", d.reason}});
+  nlohmann::json extras = nlohmann::json::array();
+  for (const DepthReport& d : extra_depths) extras.push_back(d.toJson());
   return {{"frame", frame},
           {"cameras_used", cameras_used},
           {"cameras_dropped", dropped},
@@ -178,6 +185,7 @@ nlohmann::json FrameReport::toJson() const {
           {"depth_pixels", depth_pixels},
           {"depth_min_m", depth_min_m},
           {"depth_max_m", depth_max_m},
+          {"extra_depths", extras},
           {"refine", refine_source.empty()
                          ? nlohmann::json(nullptr)
                          : nlohmann::json{{"source", refine_source},
@@ -198,7 +206,9 @@ struct CarveJob::Impl {
   RunOptions options;
   std::vector<std::string> carve_names;
   std::string depth_name;
-  std::vector<std::string> input_names;  // carve cameras, then the depth camera if not among them
+  std::vector<std::string> extra_depth_names;  // more cameras to write depth for
+  // Carve cameras, then the depth camera and the extra depth cameras not among them.
+  std::vector<std::string> input_names;
   std::vector<Keyer> keyers;             // one per input camera, kept across frames
   std::unique_ptr<Carver> carver;
   nlohmann::json config;                 // what a finished frame's report must match
@@ -264,38 +274,75 @@ struct CarveJob::Impl {
     }
   }
 
-  // Depth for the depth camera at its pose for this frame: EXR and preview.
-  void writeDepth(int frame, const VisualHull& hull, const FrameInputs& in, FrameReport& report) {
-    const size_t d = static_cast<size_t>(
-        std::find(input_names.begin(), input_names.end(), depth_name) - input_names.begin());
-    cv::Mat depth_sil;  // empty = every pixel
+  size_t inputIndex(const std::string& name) const {
+    return static_cast<size_t>(std::find(input_names.begin(), input_names.end(), name) -
+                               input_names.begin());
+  }
+
+  // Where camera 'name''s hull depth goes: depth/ for the depth camera, depth_cameras/<cam>/
+  // for the others.
+  fs::path depthPath(const std::string& name, int frame, const char* ext) const {
+    if (name == depth_name) return path("depth", frame, ext);
+    return options.out / "depth_cameras" / name / (frameStem(frame) + ext);
+  }
+
+  struct HullDepth {
+    cv::Mat depth;
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;  // finite range
+  };
+
+  // Hull depth of camera 'name' at its pose for this frame, inside its silhouette (every pixel
+  // where it is dropped, or without depth_inside_silhouette): EXR and preview.
+  HullDepth writeHullDepth(const std::string& name, int frame, const VisualHull& hull,
+                           const FrameInputs& in, DepthReport& r) {
+    const size_t d = inputIndex(name);
+    r.camera = name;
+    cv::Mat sil;  // empty = every pixel
     if (!options.depth_inside_silhouette) {
-      report.depth_silhouette = "none: depth wherever the ray meets the hull";
+      r.silhouette = "none: depth wherever the ray meets the hull";
     } else if (!in.dropped[d].empty()) {
-      report.depth_silhouette = "none: " + depth_name + " dropped (" + in.dropped[d] + ")";
+      r.silhouette = "none: " + name + " dropped (" + in.dropped[d] + ")";
     } else {
-      depth_sil = in.silhouettes[d];
-      report.depth_silhouette = take.hasMasks() ? "mask" : "key";
+      sil = in.silhouettes[d];
+      r.silhouette = take.hasMasks() ? "mask" : "key";
     }
-    const cv::Mat depth = carver->depth(hull, take.cameraAt(depth_name, frame), depth_sil);
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (int y = 0; y < depth.rows; ++y) {
-      const float* p = depth.ptr<float>(y);
-      for (int x = 0; x < depth.cols; ++x) {
+    HullDepth h;
+    h.depth = carver->depth(hull, take.cameraAt(name, frame), sil);
+    for (int y = 0; y < h.depth.rows; ++y) {
+      const float* p = h.depth.ptr<float>(y);
+      for (int x = 0; x < h.depth.cols; ++x) {
         if (!std::isfinite(p[x])) continue;
-        ++report.depth_pixels;
-        lo = std::min<double>(lo, p[x]);
-        hi = std::max<double>(hi, p[x]);
+        ++r.pixels;
+        h.lo = std::min<double>(h.lo, p[x]);
+        h.hi = std::max<double>(h.hi, p[x]);
       }
     }
-    if (report.depth_pixels > 0) {
-      report.depth_min_m = lo;
-      report.depth_max_m = hi;
+    if (r.pixels > 0) {
+      r.min_m = h.lo;
+      r.max_m = h.hi;
     }
-    writeDepthExr(path("depth", frame, ".exr"), depth,
-                  {{"previz:camera", depth_name}, {"previz:frame", std::to_string(frame)},
+    writeDepthExr(depthPath(name, frame, ".exr"), h.depth,
+                  {{"previz:camera", name}, {"previz:frame", std::to_string(frame)},
                    {"previz:source", "visual hull (previz carve)"}});
-    writeImageAtomic(path("depth", frame, ".png"), depthPreview(depth, lo, hi));
+    writeImageAtomic(depthPath(name, frame, ".png"), depthPreview(h.depth, h.lo, h.hi));
+    return h;
+  }
+
+  // Depth for the extra depth cameras, then for the depth camera (and its refined layer).
+  void writeDepth(int frame, const VisualHull& hull, const FrameInputs& in, FrameReport& report) {
+    for (const std::string& name : extra_depth_names) {
+      report.extra_depths.emplace_back();
+      writeHullDepth(name, frame, hull, in, report.extra_depths.back());
+    }
+    DepthReport main;
+    const HullDepth h = writeHullDepth(depth_name, frame, hull, in, main);
+    report.depth_silhouette = main.silhouette;
+    report.depth_pixels = main.pixels;
+    report.depth_min_m = main.min_m;
+    report.depth_max_m = main.max_m;
+    const cv::Mat& depth = h.depth;
+    const double lo = h.lo, hi = h.hi;
+    const size_t d = inputIndex(depth_name);
     if (!options.refine_depth) return;
 
     // The second layer: beyond the hull by photo-consistency. Without the depth camera's plate
@@ -366,10 +413,23 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     rig.at(m.depth_name);
   }
 
+  for (const std::string& name : m.options.extra_depth_cameras) {
+    rig.at(name);  // throws naming the camera
+    if (m.depth_name.empty())
+      throw Error("carve: extra depth cameras need a depth camera (the rig has no camera with "
+                  "role 'main'; give --depth-camera)",
+                  fieldContext("extra_depth_cameras"));
+    if (name != m.depth_name && std::find(m.extra_depth_names.begin(), m.extra_depth_names.end(),
+                                          name) == m.extra_depth_names.end())
+      m.extra_depth_names.push_back(name);
+  }
+
   m.input_names = m.carve_names;
-  if (!m.depth_name.empty() &&
-      std::find(m.input_names.begin(), m.input_names.end(), m.depth_name) == m.input_names.end())
-    m.input_names.push_back(m.depth_name);
+  std::vector<std::string> depth_names = m.extra_depth_names;
+  if (!m.depth_name.empty()) depth_names.insert(depth_names.begin(), m.depth_name);
+  for (const std::string& name : depth_names)
+    if (std::find(m.input_names.begin(), m.input_names.end(), name) == m.input_names.end())
+      m.input_names.push_back(name);
 
   if (!take.hasMasks()) {
     for (const std::string& name : m.input_names) {
@@ -391,6 +451,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
                           h.volume.max().x(), h.volume.max().y(), h.volume.max().z()}},
               {"carve_cameras", m.carve_names},
               {"depth_camera", m.depth_name},
+              {"extra_depth_cameras", m.extra_depth_names},
               {"depth_inside_silhouette", m.options.depth_inside_silhouette},
               {"silhouettes", take.hasMasks() ? "masks" : "keyer"},
               {"main_poses", take.hasMainPoses()},
@@ -410,6 +471,9 @@ CarveJob::~CarveJob() = default;
 const RunOptions& CarveJob::options() const { return impl_->options; }
 const std::vector<std::string>& CarveJob::carveCameras() const { return impl_->carve_names; }
 const std::string& CarveJob::depthCamera() const { return impl_->depth_name; }
+const std::vector<std::string>& CarveJob::extraDepthCameras() const {
+  return impl_->extra_depth_names;
+}
 
 std::vector<int> CarveJob::selectedFrames() const {
   const RunOptions& o = impl_->options;
@@ -433,6 +497,10 @@ std::vector<fs::path> CarveJob::outputs(int frame) const {
     if (m.options.refine_depth) {
       paths.push_back(m.path("depth_refined", frame, ".exr"));
       paths.push_back(m.path("depth_refined", frame, ".png"));
+    }
+    for (const std::string& name : m.extra_depth_names) {
+      paths.push_back(m.depthPath(name, frame, ".exr"));
+      paths.push_back(m.depthPath(name, frame, ".png"));
     }
   }
   paths.push_back(m.path("mesh", frame, ".ply"));
@@ -515,10 +583,10 @@ RunSummary CarveJob::run(const std::function<void(int, int)>& progress) {
   const Clock::time_point t0 = Clock::now();
   RunSummary summary;
   summary.selected = selectedFrames();
-  std::vector<int> todo;
-  for (int f : summary.selected) (finished(f) ? summary.skipped : todo).push_back(f);
+  std::vector<int> to_carve;
+  for (int f : summary.selected) (finished(f) ? summary.skipped : to_carve).push_back(f);
   int done = 0;
-  for (int f : todo) {
+  for (int f : to_carve) {
     try {
       summary.carved.push_back(runFrame(f));
     } catch (const std::exception& e) {
@@ -526,7 +594,7 @@ RunSummary CarveJob::run(const std::function<void(int, int)>& progress) {
       summary.failed.push_back({f, e.what()});
     }
     ++done;
-    if (progress) progress(done, static_cast<int>(todo.size()));
+    if (progress) progress(done, static_cast<int>(to_carve.size()));
   }
 
   // carve.jsonl: every finished frame of the take (all shards), in frame order.

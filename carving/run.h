@@ -48,6 +48,10 @@ struct RunOptions {
   // Camera the depth map is made for: "" = the rig's camera with role "main"; when the rig has
   // none, no depth is written.
   std::string depth_camera;
+  // More cameras to write hull depth for, each in depth_cameras/<cam>/ (inside its own key or
+  // mask, at its pose for the frame): e.g. every witness, for post. The depth camera itself and
+  // repeats are left out. Only the depth camera gets depth_refined/.
+  std::vector<std::string> extra_depth_cameras;
   // Cameras that carve: empty = every camera with role "witness".
   std::vector<std::string> carve_cameras;
   // true: depth only inside the depth camera's silhouette (its key or mask); false: wherever
@@ -68,6 +72,15 @@ struct DroppedCamera {
 };
 
 // What one frame did; written as one JSON line (report/%06d.json) after every other output.
+// Hull depth written for one camera in one frame.
+struct DepthReport {
+  std::string camera;
+  std::string silhouette;          // "key" | "mask" | "none: <why>"
+  long long pixels = 0;            // finite depth pixels
+  double min_m = 0, max_m = 0;     // range of the preview's colour scale
+  nlohmann::json toJson() const;
+};
+
 struct FrameReport {
   int frame = 0;
   std::vector<std::string> cameras_used;
@@ -78,6 +91,7 @@ struct FrameReport {
   double volume_m3 = 0;            // inside cells + half the surface cells
   long long depth_pixels = 0;      // finite depth pixels
   double depth_min_m = 0, depth_max_m = 0;  // range of the preview's colour scale
+  std::vector<DepthReport> extra_depths;     // extra_depth_cameras, in their order
   // With refine_depth: "plates" (refined) or "none: <why>" (depth_refined = the hull depth), the
   // pixels refined and given a deeper depth, and its time (part of depth_ms).
   std::string refine_source;
@@ -117,6 +131,7 @@ class CarveJob {
   const RunOptions& options() const;
   const std::vector<std::string>& carveCameras() const;
   const std::string& depthCamera() const;
+  const std::vector<std::string>& extraDepthCameras() const;
 
   // Frames of the take in the range and this shard, ascending.
   std::vector<int> selectedFrames() const;

@@ -111,7 +111,7 @@ while read -r path t; do
   elif [ "$newt" != "$t" ]; then bad=$((bad + 1)); echo "rewritten: $path"; fi
 done <"$tmp/before.txt"
 [ $bad = 0 ] && ok "no finished frame's file was rewritten" || fail "$bad finished files rewritten"
-[ $redone = 8 ] && ok "the damaged frame's 8 files (7 carve, 1 track) were redone" || fail "damaged frame: $redone of 8 files redone"
+[ $redone = 16 ] && ok "the damaged frame's 16 files (15 carve: depth of main + 4 witnesses, mesh, points, report; 1 track) were redone" || fail "damaged frame: $redone of 16 files redone"
 "$bin" batch collect "$tmp/fault" --y-up --out "$tmp/fault_out" >/dev/null 2>&1 && ok "fault collect" || fail "fault collect"
 if diff -r "$tmp/slurm_out" "$tmp/fault_out" >"$tmp/diff2.txt"; then
   ok "after cancel + damage + resume, collected outputs identical to item 1's"

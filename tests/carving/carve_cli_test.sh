@@ -65,6 +65,23 @@ if "$bin" carve "${common[@]}" --masks "$tmp/masks" --frames 1 --out "$tmp/dropp
   ok "missing witness frame dropped and named"
 else fail "dropped camera: $(cat "$tmp/dropped.err")"; fi
 
+# --depth-cameras all: every other camera's hull depth in depth_cameras/<cam>/ (not the main one
+# twice); an unknown camera is refused, named.
+all_rc=0
+"$bin" carve "${common[@]}" --masks "$take/truth/masks" --frames 1 --depth-cameras all --out "$tmp/alldepth" \
+  >/dev/null 2>"$tmp/alldepth.err" || all_rc=1
+for c in witness01 witness02 witness03 witness04; do
+  [ -s "$tmp/alldepth/depth_cameras/$c/000001.exr" ] && [ -s "$tmp/alldepth/depth_cameras/$c/000001.png" ] || all_rc=1
+done
+if [ $all_rc = 0 ] && [ ! -e "$tmp/alldepth/depth_cameras/main" ] && [ -s "$tmp/alldepth/depth/000001.exr" ] \
+   && grep -q '"extra_depths":\[{"camera":"witness01",' "$tmp/alldepth/report/000001.json"; then
+  ok "--depth-cameras all writes every camera's depth"
+else fail "--depth-cameras all: $(tail -n 3 "$tmp/alldepth.err")"; fi
+if ! "$bin" carve "${common[@]}" --masks "$take/truth/masks" --frames 1 --depth-cameras witness09 \
+     --out "$tmp/baddepth" >/dev/null 2>"$tmp/baddepth.err" && grep -q "witness09" "$tmp/baddepth.err"; then
+  ok "unknown depth camera refused, named"
+else fail "unknown depth camera: $(cat "$tmp/baddepth.err")"; fi
+
 # --refine: the second depth layer beside the hull depth, from the plates (also with masks).
 if "$bin" carve "${common[@]}" --masks "$take/truth/masks" --frames 1 --refine --out "$tmp/refined" >/dev/null 2>"$tmp/refined.err" \
    && [ -s "$tmp/refined/depth_refined/000001.exr" ] && [ -s "$tmp/refined/depth_refined/000001.png" ] \

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -77,6 +78,29 @@ RunOptions fastOptions(const fs::path& out) {
 
 nlohmann::json readReport(const fs::path& path) { return nlohmann::json::parse(readTextFile(path)); }
 
+// Hull depth of one camera against its true mask and true depth: pixels inside the mask, those
+// with a depth, those whose depth lies in front of the true one (up to 'slack_m'), and finite
+// depths outside the mask.
+struct DepthCheck {
+  long inside = 0, hit = 0, in_front = 0, outside_finite = 0;
+};
+DepthCheck checkDepth(const cv::Mat& depth, const cv::Mat& mask, const cv::Mat& true_z, double slack_m) {
+  DepthCheck c;
+  for (int y = 0; y < depth.rows; ++y)
+    for (int x = 0; x < depth.cols; ++x) {
+      const float z = depth.at<float>(y, x);
+      if (mask.at<uchar>(y, x) <= 127) {
+        c.outside_finite += std::isfinite(z) ? 1 : 0;
+        continue;
+      }
+      ++c.inside;
+      if (!std::isfinite(z)) continue;
+      ++c.hit;
+      c.in_front += z <= true_z.at<float>(y, x) + slack_m ? 1 : 0;
+    }
+  return c;
+}
+
 TEST(CarveRun, MaskedTakeGivesDepthInsideTheMainSilhouetteAndReportsCameras) {
   const ScratchTake t = scratchTake("masked");
   const Take take({t.dir / "take", t.rig, t.masks, t.poses});
@@ -105,24 +129,11 @@ TEST(CarveRun, MaskedTakeGivesDepthInsideTheMainSilhouetteAndReportsCameras) {
                                     cv::IMREAD_GRAYSCALE);
     const cv::Mat true_z = readDepthExr(truth / "depth" / "main" / (std::string(stem) + ".exr"));
     ASSERT_EQ(depth.size(), mask.size());
-    long inside = 0, hit = 0, in_front = 0, outside_finite = 0;
-    for (int y = 0; y < depth.rows; ++y) {
-      for (int x = 0; x < depth.cols; ++x) {
-        const float z = depth.at<float>(y, x);
-        if (mask.at<uchar>(y, x) <= 127) {
-          outside_finite += std::isfinite(z) ? 1 : 0;
-          continue;
-        }
-        ++inside;
-        if (!std::isfinite(z)) continue;
-        ++hit;
-        // The hull contains the actor: its first surface lies in front of the actor's, up to
-        // the binary masks' own error (a mask pixel is in when its centre ray hits: the
-        // silhouettes are eroded by up to half a witness pixel) — which only holds when the
-        // depth is made at the frame's main pose.
-        in_front += z <= true_z.at<float>(y, x) + witness_px_m ? 1 : 0;
-      }
-    }
+    // The hull contains the actor: its first surface lies in front of the actor's, up to the
+    // binary masks' own error (a mask pixel is in when its centre ray hits: the silhouettes are
+    // eroded by up to half a witness pixel) — which only holds when the depth is made at the
+    // frame's main pose.
+    const auto [inside, hit, in_front, outside_finite] = checkDepth(depth, mask, true_z, witness_px_m);
     EXPECT_EQ(outside_finite, 0) << "depth outside the main silhouette must be +inf";
     ASSERT_GT(inside, 500);
     EXPECT_GT(static_cast<double>(hit) / inside, 0.98);
@@ -144,6 +155,64 @@ TEST(CarveRun, MaskedTakeGivesDepthInsideTheMainSilhouetteAndReportsCameras) {
   int n = 0;
   for (std::string line; std::getline(lines, line); ++n) EXPECT_EQ(nlohmann::json::parse(line)["frame"], n);
   EXPECT_EQ(n, kFrames);
+}
+
+// Depth for more cameras than the main one (for post: every camera's depth sequence): each in
+// depth_cameras/<cam>/, inside that camera's own mask, in front of its true depth like the main
+// camera's; repeats and the depth camera itself are left out; an unknown camera is refused.
+TEST(CarveRun, ExtraDepthCamerasGetTheirOwnDepthInsideTheirMasks) {
+  const ScratchTake t = scratchTake("extra_depth");
+  const Take take({t.dir / "take", t.rig, t.masks, t.poses});
+  RunOptions o = fastOptions(t.dir / "out");
+  o.frames = parseFrameRange("1");
+  o.extra_depth_cameras = {"witness03", "main", "witness01", "witness03"};
+  CarveJob job(take, o);
+  EXPECT_EQ(job.extraDepthCameras(), (std::vector<std::string>{"witness03", "witness01"}));
+  const RunSummary s = job.run();
+  ASSERT_TRUE(s.failed.empty()) << s.failed.front().reason;
+  ASSERT_EQ(s.carved.size(), 1u);
+  const nlohmann::json r = readReport(job.reportPath(1));
+  ASSERT_EQ(r["extra_depths"].size(), 2u);
+  const fs::path truth = studioTake() / "truth";
+  for (size_t i = 0; i < 2; ++i) {
+    const std::string name = job.extraDepthCameras()[i];
+    SCOPED_TRACE(name);
+    const fs::path exr = t.dir / "out" / "depth_cameras" / name / "000001.exr";
+    EXPECT_TRUE(fs::is_regular_file(exr.parent_path() / "000001.png"));
+    const std::vector<fs::path> outs = job.outputs(1);
+    EXPECT_NE(std::find(outs.begin(), outs.end(), exr), outs.end());
+    const cv::Mat depth = readDepthExr(exr);
+    const cv::Mat mask = cv::imread((truth / "masks" / name / "000001.png").string(), cv::IMREAD_GRAYSCALE);
+    const cv::Mat true_z = readDepthExr(truth / "depth" / name / "000001.exr");
+    ASSERT_EQ(depth.size(), mask.size());
+    const RigCamera& rc = take.rig().at(name);
+    const double px_m = (rc.T_world_cam.translation() - Eigen::Vector3d(0, 0, 1)).norm() / rc.camera.fx;
+    // A carving camera's own silhouette bounds the hull: every ray inside it meets the hull,
+    // and first in front of the actor (up to the masks' half-pixel erosion; here up to 2
+    // witness pixels of slack for the 2 cm cells).
+    const auto [inside, hit, in_front, outside_finite] = checkDepth(depth, mask, true_z, 2 * px_m);
+    EXPECT_EQ(outside_finite, 0);
+    ASSERT_GT(inside, 200);
+    EXPECT_GT(static_cast<double>(hit) / inside, 0.97);
+    EXPECT_GT(static_cast<double>(in_front) / hit, 0.98);
+    EXPECT_EQ(r["extra_depths"][i]["camera"], name);
+    EXPECT_EQ(r["extra_depths"][i]["silhouette"], "mask");
+    EXPECT_EQ(r["extra_depths"][i]["pixels"].get<long>(), hit);
+  }
+  // Changing the extra cameras changes the settings: the frame is redone.
+  RunOptions fewer = o;
+  fewer.extra_depth_cameras = {"witness01"};
+  EXPECT_FALSE(CarveJob(take, fewer).finished(1));
+  EXPECT_TRUE(CarveJob(take, o).finished(1));
+
+  RunOptions unknown = o;
+  unknown.extra_depth_cameras = {"witness09"};
+  try {
+    CarveJob bad(take, unknown);
+    ADD_FAILURE() << "an unknown depth camera was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("witness09"), std::string::npos) << e.what();
+  }
 }
 
 TEST(CarveRun, MissingAndCorruptCameraFramesAreDroppedAndNamed) {

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
+#include <opencv2/aruco.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "calib/detail/detect_common.h"
@@ -127,6 +128,45 @@ MarkerCheck checkMarker(const std::array<Eigen::Vector2d, 4>& px, cv::Size size,
   if (shortest_edge_px) *shortest_edge_px = edge;
   if (edge < options.min_marker_px) return MarkerCheck::kTooSmall;
   return border ? MarkerCheck::kAtBorder : MarkerCheck::kOk;
+}
+
+std::vector<BoardMarker> detectBoardMarkers(const DetectInput& input, const BoardSpec& board,
+                                            int n_markers, ViewObservations& out) {
+  const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(board.dictionary));
+  const auto params = cv::aruco::DetectorParameters::create();
+  params->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
+  params->adaptiveThreshWinSizeStep = 4;
+  params->perspectiveRemovePixelPerCell = 8;
+  params->perspectiveRemoveIgnoredMarginPerCell = 0.3;
+  std::vector<std::vector<cv::Point2f>> corners, rejected;
+  std::vector<int> ids;
+  cv::aruco::detectMarkers(input.grey(), dictionary, corners, ids, params, rejected);
+
+  std::map<int, int> seen;
+  for (int id : ids) ++seen[id];
+  std::vector<BoardMarker> found;
+  int small = 0, at_border = 0;
+  for (size_t k = 0; k < ids.size(); ++k) {
+    const int index = ids[k] - board.first_id;
+    if (index < 0 || index >= n_markers || seen[ids[k]] != 1) continue;
+    BoardMarker m;
+    m.index = index;
+    for (int q = 0; q < 4; ++q) m.px[q] = Eigen::Vector2d(corners[k][q].x, corners[k][q].y);
+    const MarkerCheck check = checkMarker(m.px, input.size(), input.options(), &m.edge_px);
+    if (check == MarkerCheck::kTooSmall) {
+      ++small;
+    } else if (check == MarkerCheck::kAtBorder) {
+      ++at_border;
+    } else {
+      found.push_back(m);
+    }
+  }
+  if (found.empty())
+    out.failure = ids.empty() ? "no ArUco markers of " + board.dictionary + " found"
+                              : "no usable marker of this board (" + std::to_string(ids.size()) +
+                                    " detected, " + std::to_string(small) + " too small, " +
+                                    std::to_string(at_border) + " at the border)";
+  return found;
 }
 
 RefineWindow refineWindow(double free_px, const DetectOptions& options) {

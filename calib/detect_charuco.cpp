@@ -190,55 +190,18 @@ void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObserva
       if (isWhite(r, c)) marker_square.emplace_back(r, c);
   const int n_markers = static_cast<int>(marker_square.size());
 
-  const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(board.dictionary));
-  const auto params = cv::aruco::DetectorParameters::create();
-  params->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;  // corners come from cornerSubPix
-  // Small, soft markers: more threshold window sizes (3, 7, ... 23 instead of 3, 13, 23), bits
-  // sampled at 8 px per cell and read from the middle 40 % of each cell. On 20 views of a 7 x 9
-  // DICT_4X4_250 board with 1 px blur and noise 2 (tests/calib/solve_fixtures.h), this decodes
-  // 606 board markers instead of OpenCV's default 521, with no foreign id.
-  params->adaptiveThreshWinSizeStep = 4;
-  params->perspectiveRemovePixelPerCell = 8;
-  params->perspectiveRemoveIgnoredMarginPerCell = 0.3;
-  std::vector<std::vector<cv::Point2f>> corners, rejected;
-  std::vector<int> marker_ids;
-  cv::aruco::detectMarkers(input.grey(), dictionary, corners, marker_ids, params, rejected);
-
-  // Keep the board's markers that are large enough and clear of the border; an id seen twice
-  // is ambiguous and dropped.
-  std::map<int, int> seen;
-  for (int id : marker_ids) ++seen[id];
   std::map<std::pair<int, int>, Marker> by_square;
-  int small = 0, at_border = 0;
-  for (size_t k = 0; k < marker_ids.size(); ++k) {
-    const int index = marker_ids[k] - board.first_id;
-    if (index < 0 || index >= n_markers || seen[marker_ids[k]] != 1) continue;
+  for (const BoardMarker& found : detectBoardMarkers(input, board, n_markers, out)) {
     Marker mk;
-    mk.square_r = marker_square[static_cast<size_t>(index)].first;
-    mk.square_c = marker_square[static_cast<size_t>(index)].second;
+    mk.square_r = marker_square[static_cast<size_t>(found.index)].first;
+    mk.square_c = marker_square[static_cast<size_t>(found.index)].second;
     const double x0 = mk.square_c * s + g, y0 = mk.square_r * s + g;
     mk.board = {Eigen::Vector2d(x0, y0), Eigen::Vector2d(x0 + m, y0),
                 Eigen::Vector2d(x0 + m, y0 + m), Eigen::Vector2d(x0, y0 + m)};
-    for (int q = 0; q < 4; ++q) mk.px[q] = Eigen::Vector2d(corners[k][q].x, corners[k][q].y);
-    const MarkerCheck check = checkMarker(mk.px, input.size(), options);
-    if (check == MarkerCheck::kTooSmall) {
-      ++small;
-      continue;
-    }
-    if (check == MarkerCheck::kAtBorder) {
-      ++at_border;
-      continue;
-    }
+    mk.px = found.px;
     by_square[{mk.square_r, mk.square_c}] = mk;
   }
-  if (by_square.empty()) {
-    out.failure = marker_ids.empty()
-                      ? "no ArUco markers of " + board.dictionary + " found"
-                      : "no usable marker of this board (" + std::to_string(marker_ids.size()) +
-                            " detected, " + std::to_string(small) + " too small, " +
-                            std::to_string(at_border) + " at the border)";
-    return;
-  }
+  if (by_square.empty()) return;  // out.failure says why
 
   const std::string mismatch = checkLayout(input.grey(), board, isWhite, by_square);
   if (!mismatch.empty()) {
@@ -252,7 +215,8 @@ void detectCharuco(const DetectInput& input, const BoardSpec& board, ViewObserva
   std::vector<Eigen::Matrix3d> local_H;  // board metres relative to the corner -> px
   std::vector<LocalPattern> patterns;
   // The markers' black border: one bit cell of the dictionary's code grid plus its border.
-  const double border_m = m / (dictionary->markerSize + 2);
+  const double border_m =
+      m / (cv::aruco::getPredefinedDictionary(openCvDictionaryId(board.dictionary))->markerSize + 2);
   for (int r = 0; r + 1 < board.rows; ++r)
     for (int c = 0; c + 1 < board.cols; ++c) {
       // Both white squares touching the corner must have their marker (OpenCV's minMarkers 2).

@@ -128,49 +128,16 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
   const std::vector<QuadtreeMarker> layout = quadtreeMarkers(board);
   const int n_markers = static_cast<int>(layout.size());
 
-  const auto dictionary = cv::aruco::getPredefinedDictionary(openCvDictionaryId(board.dictionary));
-  const auto params = cv::aruco::DetectorParameters::create();
-  params->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;  // corners come from cornerSubPix
-  // As for ChArUco (detect_charuco.cpp): small, soft markers decode better with more threshold
-  // windows, 8 px per bit cell and bits read from the middle 40 % of each cell.
-  params->adaptiveThreshWinSizeStep = 4;
-  params->perspectiveRemovePixelPerCell = 8;
-  params->perspectiveRemoveIgnoredMarginPerCell = 0.3;
-  std::vector<std::vector<cv::Point2f>> corners, rejected;
-  std::vector<int> marker_ids;
-  cv::aruco::detectMarkers(input.grey(), dictionary, corners, marker_ids, params, rejected);
-
-  // The board's markers, large enough and clear of the border; an id seen twice is ambiguous.
-  std::map<int, int> seen;
-  for (int id : marker_ids) ++seen[id];
   std::vector<Found> found;
-  int small = 0, at_border = 0;
-  for (size_t k = 0; k < marker_ids.size(); ++k) {
-    const int index = marker_ids[k] - board.first_id;
-    if (index < 0 || index >= n_markers || seen[marker_ids[k]] != 1) continue;
+  for (const BoardMarker& marker : detectBoardMarkers(input, board, n_markers, out)) {
     Found f;
-    f.index = index;
-    f.board = markerCorners(layout[static_cast<size_t>(index)]);
-    for (int q = 0; q < 4; ++q) f.px[q] = Eigen::Vector2d(corners[k][q].x, corners[k][q].y);
-    const MarkerCheck check = checkMarker(f.px, input.size(), options, &f.edge_px);
-    if (check == MarkerCheck::kTooSmall) {
-      ++small;
-      continue;
-    }
-    if (check == MarkerCheck::kAtBorder) {
-      ++at_border;
-      continue;
-    }
+    f.index = marker.index;
+    f.board = markerCorners(layout[static_cast<size_t>(marker.index)]);
+    f.px = marker.px;
+    f.edge_px = marker.edge_px;
     found.push_back(f);
   }
-  if (found.empty()) {
-    out.failure = marker_ids.empty()
-                      ? "no ArUco markers of " + board.dictionary + " found"
-                      : "no usable marker of this board (" + std::to_string(marker_ids.size()) +
-                            " detected, " + std::to_string(small) + " too small, " +
-                            std::to_string(at_border) + " at the border)";
-    return;
-  }
+  if (found.empty()) return;  // out.failure says why
 
   // Layout check: each marker against a RANSAC homography of the markers whose centres lie
   // within 1.5 outer cells of its own (small enough for the lens to be a homography there to a
@@ -224,7 +191,7 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
   // reaches them when w > bit); outside, the nearest other marker, a white gap away along a
   // board axis (reached when sqrt(2) w > gap). The gap between markers of one level is
   // cell - edge; next to the finer cells of the ring inside it is (cell - edge) * 3 / 4.
-  const int cells = dictionary->markerSize + 2;
+  const int cells = cv::aruco::getPredefinedDictionary(openCvDictionaryId(board.dictionary))->markerSize + 2;
   std::vector<cv::Point2f> pts;
   std::vector<RefineWindow> windows;
   std::vector<int> ids;

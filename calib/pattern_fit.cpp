@@ -19,7 +19,6 @@ constexpr double kInvSqrt2 = 0.70710678118654752440;
 constexpr double kInvSqrt2Pi = 0.39894228040143267794;
 
 double normCdf(double x) { return 0.5 * std::erfc(-x * kInvSqrt2); }
-double normPdf(double x) { return kInvSqrt2Pi * std::exp(-0.5 * x * x); }
 // Single precision for the fit's inner loop (twice as fast; the model needs ~1e-6 of the
 // contrast, the noise is 1e-2 of it).
 float normCdfF(float x) { return 0.5f * std::erfc(-x * static_cast<float>(kInvSqrt2)); }

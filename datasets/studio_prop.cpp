@@ -10,6 +10,7 @@
 #include <apriltag/common/image_u8.h>
 #include <apriltag/tag36h11.h>
 
+#include "core/box_tag.h"
 #include "datasets/detail/studio_detail.h"
 
 namespace previz::synth::detail {
@@ -120,21 +121,6 @@ class PropPrimitive final : public Primitive {
   std::array<FaceTag, 6> faces_;
 };
 
-// Tag frame on a face with outward normal n (prop frame): z into the face; the tag reads
-// upright with the prop's +z up on the sides, and with +y away from a viewer standing at -y
-// on the top face.
-Pose faceTagPose(const Eigen::Vector3d& n, const Eigen::Vector3d& half) {
-  const Eigen::Vector3d z = -n;
-  const Eigen::Vector3d y = std::abs(n.z()) > 0.5 ? Eigen::Vector3d(0, -1, 0) : Eigen::Vector3d(0, 0, -1);
-  const Eigen::Vector3d x = y.cross(z);
-  Pose T = Pose::Identity();
-  T.linear().col(0) = x;
-  T.linear().col(1) = y;
-  T.linear().col(2) = z;
-  T.translation() = n.cwiseProduct(half);
-  return T;
-}
-
 double smoothstep(double e0, double e1, double x) {
   const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
   return t * t * (3 - 2 * t);
@@ -163,7 +149,7 @@ PropSpec makePropSpec() {
     tag.family = "tag36h11";
     tag.id = id;
     tag.size_m = kPropTagSize;
-    tag.T_prop_tag = faceTagPose(normals[id], half);
+    tag.T_prop_tag = boxFaceTagPose(normals[id], half);
     spec.tags.push_back(tag);
   }
   return spec;

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/box_tag.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "tracking/detail/families.h"
@@ -68,20 +69,6 @@ Pose poseField(const nlohmann::json& j, const std::string& field, const std::str
   } catch (const Error& e) {
     throw Error(e.message(), ctx(file, e.context().field.empty() ? field : e.context().field));
   }
-}
-
-// Tag frame on a face with outward normal n (prop frame): z into the face; upright with +z up on
-// the sides, +y away from a viewer at -y on the top and bottom (datasets/studio_prop.cpp's crate).
-Pose faceTagPose(const Eigen::Vector3d& n, const Eigen::Vector3d& half) {
-  const Eigen::Vector3d z = -n;
-  const Eigen::Vector3d y = std::abs(n.z()) > 0.5 ? Eigen::Vector3d(0, -1, 0) : Eigen::Vector3d(0, 0, -1);
-  const Eigen::Vector3d x = y.cross(z);
-  Pose T = Pose::Identity();
-  T.linear().col(0) = x;
-  T.linear().col(1) = y;
-  T.linear().col(2) = z;
-  T.translation() = n.cwiseProduct(half);
-  return T;
 }
 
 std::optional<Eigen::Vector3d> faceNormal(const std::string& face) {
@@ -269,7 +256,7 @@ PropDef makeBoxProp(const BoxPropOptions& o) {
     t.family = o.family;
     t.id = id++;
     t.size_m = o.tag_size_m;
-    t.T_prop_tag = faceTagPose(*faceNormal(f), half);
+    t.T_prop_tag = boxFaceTagPose(*faceNormal(f), half);
     p.tags.push_back(t);
   }
   return p;

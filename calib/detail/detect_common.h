@@ -48,6 +48,22 @@ enum class MarkerCheck { kOk, kTooSmall, kAtBorder };
 MarkerCheck checkMarker(const std::array<Eigen::Vector2d, 4>& px, cv::Size size,
                         const DetectOptions& options, double* shortest_edge_px = nullptr);
 
+// The board's ArUco markers in the image (ChArUco and quadtree boards): OpenCV's detector with
+// parameters for small, soft markers (more threshold windows: 3, 7, ... 23 instead of 3, 13,
+// 23; bits sampled at 8 px per cell and read from the middle 40 % of each cell; no corner
+// refinement: the detectors refine the corners themselves). On 20 views of a 7 x 9
+// DICT_4X4_250 board with 1 px blur and noise 2 (tests/calib/solve_fixtures.h) this decodes 606
+// board markers instead of OpenCV's default 521, with no foreign id. Kept: ids in [first_id,
+// first_id + n_markers) seen once (an id seen twice is ambiguous), passing checkMarker. None
+// kept: out.failure says why (nothing decoded, or how many were too small / at the border).
+struct BoardMarker {
+  int index = 0;                      // id - board.first_id
+  std::array<Eigen::Vector2d, 4> px;  // tl, tr, br, bl as printed (OpenCV's order)
+  double edge_px = 0;                 // shortest edge in the image
+};
+std::vector<BoardMarker> detectBoardMarkers(const DetectInput& input, const BoardSpec& board,
+                                            int n_markers, ViewObservations& out);
+
 // The cornerSubPix half window of a point whose nearest edge NOT passing through it lies
 // free_px away (measured in the worst direction, see the callers):
 // min(subpixel_window_px, floor(free_px - 0.5)): half a pixel is left for the anti-aliasing of

@@ -59,8 +59,8 @@ struct Witness {
 // The photo-hull terms of the cost (photoHullDepth); absent for refineDepth.
 struct FreeSpace {
   double free_m = 0.03;
-  int free_views = 2;
-  double hidden_m = 0.05;
+  int free_views = 1;
+  double hidden_m = 0;  // 0 = off
 };
 
 // The witnesses' hull depth only serves the loose visibility test (a candidate more than
@@ -219,7 +219,7 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
         const float near = w.near_depth.at<float>(dv, du), far = w.far_depth.at<float>(dv, du);
         if (std::isfinite(near) && near > q.z() + fs->free_m && ++free >= fs->free_views)
           return static_cast<double>(kAir);
-        if (std::isfinite(far) && q.z() > far + fs->hidden_m) continue;
+        if (fs->hidden_m > 0 && std::isfinite(far) && q.z() > far + fs->hidden_m) continue;
       }
       float cw[3];
       if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
@@ -251,20 +251,31 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
       double cost0 = cost(centre + t0 * d, c);
       if (cost0 <= options.agree && cost0 != kAir) continue;
       ++inconsistent;
-      if (cost0 == kAir) {
+      const bool entry_air = cost0 == kAir;
+      if (entry_air) {
         ++free_space;
         cost0 = kInf;
       }
+      double first_solid = kInf;
+      bool found = false;
       for (int s = 1; s <= n_steps; ++s) {
         const double t = t0 + s * options.step_m;
         const Eigen::Vector3d X = centre + t * d;
         if (!carver.inside(hull, X)) continue;
         const double k = cost(X, c);
+        if (k != kAir && first_solid == kInf) first_solid = t;
         if (k != kAir && k <= options.agree && k <= options.margin * cost0) {
           row[u] = static_cast<float>(t);
           ++moved;
+          found = true;
           break;
         }
+      }
+      // Space carving: what a witness looks through is air even where nothing deeper is
+      // photo-consistent; the depth goes to the first point no witness sees through.
+      if (entry_air && !found && first_solid < kInf) {
+        row[u] = static_cast<float>(first_solid);
+        ++moved;
       }
     }
   }
@@ -375,6 +386,92 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
   local.inconsistent = n.inconsistent;
   local.moved = n.moved;
   local.ms = msSince(start);
+  if (stats) *stats = std::move(local);
+  return out;
+}
+
+void PhotoHullOptions::validate() const {
+  refine.validate();
+  auto bad = [](const std::string& field, const std::string& message) {
+    throw Error("photo hull: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+  };
+  if (rounds < 0) bad("rounds", "must be >= 0 (got " + std::to_string(rounds) + ")");
+  if (!(free_m > 0) || !std::isfinite(free_m))
+    bad("free_m", "must be a finite value > 0 (got " + num(free_m) + ")");
+  if (free_views < 1) bad("free_views", "must be >= 1 (got " + std::to_string(free_views) + ")");
+  if (!(hidden_m >= 0) || !std::isfinite(hidden_m))
+    bad("hidden_m", "must be a finite value >= 0 (got " + num(hidden_m) + ")");
+}
+
+cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
+                       const Plate& plate, const cv::Mat& hull_depth,
+                       const std::vector<Plate>& witness_plates,
+                       const std::vector<cv::Mat>& witness_masks,
+                       const PhotoHullOptions& options, PhotoHullStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  PhotoHullStats local;
+  std::vector<int> index;  // carver camera of each witness used
+  std::vector<Witness> views = makeWitnesses(carver, hull, camera, plate, hull_depth,
+                                             witness_plates, witness_masks, local.depth, &index);
+  const int nw = static_cast<int>(views.size());
+  const int threads = options.refine.threads > 0 ? options.refine.threads : omp_get_max_threads();
+  {
+    // The depth camera as the witnesses' reference: its silhouette is where its hull depth is.
+    Witness m;
+    m.rc = &camera;
+    m.T_cam_world = camera.T_world_cam.inverse();
+    m.bgr = plate.bgr;
+    m.gain = plate.gain > 0 ? plate.gain : 1.0;
+    m.inv_gain = static_cast<float>(1.0 / m.gain);
+    cv::Mat mask = hull_depth < std::numeric_limits<float>::infinity();
+    m.front = visibilityMap(carver, hull, camera, mask);
+    views.push_back(std::move(m));
+  }
+  auto setDepth = [](Witness& w, const cv::Mat& depth) {
+    const cv::Mat k = cv::Mat::ones(3, 3, CV_8UC1);
+    cv::erode(depth, w.near_depth, k, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    cv::dilate(depth, w.far_depth, k, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  };
+  std::vector<const Witness*> main_refs;
+  for (int i = 0; i < nw; ++i) main_refs.push_back(&views[i]);
+  const float main_inv_gain = views[nw].inv_gain;
+  const FreeSpace fs{options.free_m, options.free_views, options.hidden_m};
+
+  cv::Mat out = hull_depth.clone();
+  ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,
+                            options.refine, nullptr, threads);
+  std::vector<cv::Mat> witness_hull(nw);
+  for (int round = 0; round < options.rounds; ++round) {
+    const auto witness_start = std::chrono::steady_clock::now();
+    setDepth(views[nw], out);
+    std::vector<cv::Mat> refined(nw);
+    local.witness_pixels.assign(nw, 0);
+    local.witness_moved.assign(nw, 0);
+    for (int i = 0; i < nw; ++i) {
+      const RigCamera& rc = *views[i].rc;
+      if (witness_hull[i].empty())
+        witness_hull[i] = carver.depth(hull, rc, witness_masks[index[i]]);
+      std::vector<const Witness*> refs;
+      for (int j = 0; j <= nw; ++j)
+        if (j != i) refs.push_back(&views[j]);
+      refined[i] = witness_hull[i].clone();
+      const ViewCounts c = refineView(carver, hull, rc, views[i].bgr, views[i].inv_gain,
+                                      refined[i], refs, options.refine, &fs, threads);
+      local.witness_pixels[i] = c.pixels;
+      local.witness_moved[i] = c.moved;
+    }
+    for (int i = 0; i < nw; ++i) setDepth(views[i], refined[i]);
+    local.witness_ms += msSince(witness_start);
+    out = hull_depth.clone();
+    n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs, options.refine,
+                   &fs, threads);
+  }
+  local.depth.pixels = n.pixels;
+  local.depth.inconsistent = n.inconsistent;
+  local.depth.moved = n.moved;
+  local.free_space = n.free_space;
+  local.ms = local.depth.ms = msSince(start);
   if (stats) *stats = std::move(local);
   return out;
 }

@@ -178,9 +178,10 @@ struct ViewCounts {
 
 // Refines 'depth' in place: the hull depth of 'camera' (full size, plate 'bgr' divided by its
 // gain) against the reference views. With 'fs' (photoHullDepth) the references' own refined
-// depths also decide visibility (a point far behind a reference's refined surface is hidden
-// from it) and free space (a point well in front of the refined surface of fs->free_views
-// references is air: they see through it).
+// depths also decide free space (a point well in front of the refined surface of
+// fs->free_views references is air: they see through it; where the hull entry is air and nothing
+// deeper agrees, the first point no reference sees through) and, with hidden_m > 0, visibility
+// (a point far behind a reference's refined surface is hidden from it).
 ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
                       const cv::Mat& bgr_plate, float inv_gain, cv::Mat& depth,
                       const std::vector<const Witness*>& refs, const RefineOptions& options,

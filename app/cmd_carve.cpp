@@ -79,6 +79,7 @@ int runCarve(const CarveArgs& a) {
   o.depth_inside_silhouette = !a.depth_everywhere;
   o.refine_depth = a.refine;
   o.refine.threads = a.threads;
+  o.photo_hull.refine.threads = a.threads;
   o.points.spacing_m = a.point_spacing_m;
   o.validate();
 
@@ -175,7 +176,8 @@ Runner addCarveCommand(CLI::App& app) {
                 "Depth wherever a ray meets the hull, not only inside the depth camera's silhouette");
   cmd->add_flag("--refine", a->refine,
                 "Also write depth_refined/: depth beyond the visual hull by photo-consistency of "
-                "the plates (needs cams/<cam>/%06d.png, also with --masks)");
+                "the plates, the witnesses' own refined depths carving free space (photo hull; "
+                "needs cams/<cam>/%06d.png, also with --masks)");
   cmd->add_option("--point-spacing", a->point_spacing_m,
                   "Point cloud: also sample faces this densely, metres (0 = mesh vertices)")
       ->capture_default_str();

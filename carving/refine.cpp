@@ -41,6 +41,7 @@ const std::array<float, 256>& srgbToLinear() {
   return lut;
 }
 
+// A reference view: a witness, or (photoHullDepth) the depth camera seen from a witness.
 struct Witness {
   const RigCamera* rc = nullptr;
   Pose T_cam_world;
@@ -50,6 +51,16 @@ struct Witness {
   int gain_samples = 0;
   float inv_gain = 1;
   cv::Mat front;       // nearest hull depth per kVisibilityBlock^2 pixels (visibilityMap)
+  // photoHullDepth: the view's own refined depth (full size), min and max over each pixel's
+  // 3x3 neighbourhood (the projection of a point is not the pixel centre); empty = none yet.
+  cv::Mat near_depth, far_depth;
+};
+
+// The photo-hull terms of the cost (photoHullDepth); absent for refineDepth.
+struct FreeSpace {
+  double free_m = 0.03;
+  int free_views = 1;
+  double hidden_m = 0;  // 0 = off
 };
 
 // The witnesses' hull depth only serves the loose visibility test (a candidate more than
@@ -161,6 +172,176 @@ void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain
   }
 }
 
+struct ViewCounts {
+  long long pixels = 0, inconsistent = 0, moved = 0, free_space = 0;
+};
+
+// Refines 'depth' in place: the hull depth of 'camera' (full size, plate 'bgr' divided by its
+// gain) against the reference views. With 'fs' (photoHullDepth) the references' own refined
+// depths also decide free space (a point well in front of the refined surface of
+// fs->free_views references is air: they see through it; where the hull entry is air and nothing
+// deeper agrees, the first point no reference sees through) and, with hidden_m > 0, visibility
+// (a point far behind a reference's refined surface is hidden from it).
+ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
+                      const cv::Mat& bgr_plate, float inv_gain, cv::Mat& depth,
+                      const std::vector<const Witness*>& refs, const RefineOptions& options,
+                      const FreeSpace* fs, int threads) {
+  const Camera& cam = camera.camera;
+  const std::array<float, 256>& lin = srgbToLinear();
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  const int n_steps = static_cast<int>(std::floor(options.search_m / options.step_m));
+  const int nw = static_cast<int>(refs.size());
+  constexpr float kAir = -1.0f;  // cost() result: free space
+  long long pixels = 0, inconsistent = 0, moved = 0, free_space = 0;
+
+  // Cost of the point X for the plate colour c: mean of the best_of smallest colour distances
+  // over the witnesses that can see X; +inf when fewer see it. A witness that has X on its own
+  // hull surface (within veto_m) sees X itself if X is matter (the hull holds all of it, so
+  // nothing can hide X from it): its disagreement beyond 'veto' rules X out.
+  auto cost = [&](const Eigen::Vector3d& X, const float* c) {
+    float d[32];
+    double vetoed = 0;
+    int n = 0, free = 0;
+    for (int i = 0; i < nw && n < 32; ++i) {
+      const Witness& w = *refs[i];
+      const Eigen::Vector3d q = w.T_cam_world * X;
+      const auto px = w.rc->camera.project(q);
+      if (!px) continue;
+      const int iu = static_cast<int>(std::floor((px->x() + 0.5) / kVisibilityBlock));
+      const int iv = static_cast<int>(std::floor((px->y() + 0.5) / kVisibilityBlock));
+      if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
+      const float front = w.front.at<float>(iv, iu);
+      if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
+      if (fs && !w.near_depth.empty()) {
+        const int du = static_cast<int>(std::floor(px->x() + 0.5));
+        const int dv = static_cast<int>(std::floor(px->y() + 0.5));
+        if (du < 0 || dv < 0 || du >= w.near_depth.cols || dv >= w.near_depth.rows) continue;
+        const float near = w.near_depth.at<float>(dv, du), far = w.far_depth.at<float>(dv, du);
+        if (std::isfinite(near) && near > q.z() + fs->free_m && ++free >= fs->free_views)
+          return static_cast<double>(kAir);
+        if (fs->hidden_m > 0 && std::isfinite(far) && q.z() > far + fs->hidden_m) continue;
+      }
+      float cw[3];
+      if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
+      d[n] = colourDistance(c, cw);
+      if (q.z() <= front + options.veto_m && d[n] > options.veto)
+        vetoed = std::max(vetoed, static_cast<double>(d[n]));
+      ++n;
+    }
+    if (n < options.best_of) return kInf;
+    std::partial_sort(d, d + options.best_of, d + n);
+    double s = 0;
+    for (int i = 0; i < options.best_of; ++i) s += d[i];
+    return std::max(s / options.best_of, vetoed);
+  };
+
+#pragma omp parallel for schedule(dynamic, 4) num_threads(threads) reduction(+ : pixels, inconsistent, moved, free_space)
+  for (int v = 0; v < cam.height; ++v) {
+    float* row = depth.ptr<float>(v);
+    const std::uint8_t* bgr = bgr_plate.ptr<std::uint8_t>(v);
+    for (int u = 0; u < cam.width; ++u) {
+      const double t0 = row[u];
+      if (!std::isfinite(t0)) continue;
+      ++pixels;
+      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+      if (!ray) continue;
+      const Eigen::Vector3d d = R * (*ray / ray->z());
+      const float c[3] = {inv_gain * lin[bgr[3 * u]], inv_gain * lin[bgr[3 * u + 1]],
+                          inv_gain * lin[bgr[3 * u + 2]]};
+      double cost0 = cost(centre + t0 * d, c);
+      if (cost0 <= options.agree && cost0 != kAir) continue;
+      ++inconsistent;
+      const bool entry_air = cost0 == kAir;
+      if (entry_air) {
+        ++free_space;
+        cost0 = kInf;
+      }
+      double first_solid = kInf;
+      bool found = false;
+      for (int s = 1; s <= n_steps; ++s) {
+        const double t = t0 + s * options.step_m;
+        const Eigen::Vector3d X = centre + t * d;
+        if (!carver.inside(hull, X)) continue;
+        const double k = cost(X, c);
+        if (k != kAir && first_solid == kInf) first_solid = t;
+        if (k != kAir && k <= options.agree && k <= options.margin * cost0) {
+          row[u] = static_cast<float>(t);
+          ++moved;
+          found = true;
+          break;
+        }
+      }
+      // Space carving: what a witness looks through is air even where nothing deeper is
+      // photo-consistent; the depth goes to the first point no witness sees through.
+      if (entry_air && !found && first_solid < kInf) {
+        row[u] = static_cast<float>(first_solid);
+        ++moved;
+      }
+    }
+  }
+  return ViewCounts{pixels, inconsistent, moved, free_space};
+}
+
+void checkImage(const cv::Mat& m, int type, const Camera& c, const char* what) {
+  if (m.type() != type || m.cols != c.width || m.rows != c.height)
+    throw Error(std::string("refine: ") + what + " must be " +
+                    (type == CV_8UC3 ? "8-bit BGR" : type == CV_8UC1 ? "8-bit single-channel"
+                                                                     : "32-bit float") +
+                    " at the camera's " + std::to_string(c.width) + "x" +
+                    std::to_string(c.height),
+                ErrorContext{"", c.name, std::nullopt, what});
+}
+
+// The witnesses with a plate and a mask (checked), their visibility maps and their gains
+// (estimated against the depth camera's where unknown).
+std::vector<Witness> makeWitnesses(const Carver& carver, const VisualHull& hull,
+                                   const RigCamera& camera, const Plate& plate,
+                                   const cv::Mat& hull_depth,
+                                   const std::vector<Plate>& witness_plates,
+                                   const std::vector<cv::Mat>& witness_masks, RefineStats& local,
+                                   std::vector<int>* indices = nullptr) {
+  const Camera& cam = camera.camera;
+  checkImage(plate.bgr, CV_8UC3, cam, "plate");
+  checkImage(hull_depth, CV_32FC1, cam, "hull depth");
+  const std::vector<RigCamera>& cams = carver.cameras();
+  if (witness_plates.size() != cams.size() || witness_masks.size() != cams.size())
+    throw Error("refine: " + std::to_string(witness_plates.size()) + " plates and " +
+                    std::to_string(witness_masks.size()) + " masks for " +
+                    std::to_string(cams.size()) + " carving cameras",
+                ErrorContext{"", cam.name, std::nullopt, "witness_plates"});
+  std::vector<Witness> witnesses;
+  for (size_t c = 0; c < cams.size(); ++c) {
+    if (witness_plates[c].bgr.empty() || witness_masks[c].empty()) continue;
+    checkImage(witness_plates[c].bgr, CV_8UC3, cams[c].camera, "plate");
+    checkImage(witness_masks[c], CV_8UC1, cams[c].camera, "mask");
+    Witness w;
+    w.rc = &cams[c];
+    w.T_cam_world = cams[c].T_world_cam.inverse();
+    w.bgr = witness_plates[c].bgr;
+    w.gain = witness_plates[c].gain;
+    w.front = visibilityMap(carver, hull, cams[c], witness_masks[c]);
+    witnesses.push_back(std::move(w));
+    local.witnesses_used.push_back(cams[c].camera.name);
+    if (indices) indices->push_back(static_cast<int>(c));
+  }
+  const double main_gain = plate.gain > 0 ? plate.gain : 1.0;
+  estimateGains(camera, plate.bgr, main_gain, hull_depth, witnesses);
+  for (const Witness& w : witnesses) {
+    local.witness_gains.push_back(w.gain);
+    if (w.estimated) {
+      local.gains_estimated.push_back(w.rc->camera.name);
+      local.gain_samples.push_back(w.gain_samples);
+    }
+  }
+  return witnesses;
+}
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
 }  // namespace
 
 void RefineOptions::validate() const {
@@ -192,124 +373,106 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
                     RefineStats* stats) {
   const auto start = std::chrono::steady_clock::now();
   options.validate();
-  const Camera& cam = camera.camera;
-  auto check = [](const cv::Mat& m, int type, const Camera& c, const char* what) {
-    if (m.type() != type || m.cols != c.width || m.rows != c.height)
-      throw Error(std::string("refine: ") + what + " must be " +
-                      (type == CV_8UC3 ? "8-bit BGR" : type == CV_8UC1 ? "8-bit single-channel"
-                                                                       : "32-bit float") +
-                      " at the camera's " + std::to_string(c.width) + "x" +
-                      std::to_string(c.height),
-                  ErrorContext{"", c.name, std::nullopt, what});
-  };
-  check(plate.bgr, CV_8UC3, cam, "plate");
-  check(hull_depth, CV_32FC1, cam, "hull depth");
-  const std::vector<RigCamera>& cams = carver.cameras();
-  if (witness_plates.size() != cams.size() || witness_masks.size() != cams.size())
-    throw Error("refine: " + std::to_string(witness_plates.size()) + " plates and " +
-                    std::to_string(witness_masks.size()) + " masks for " +
-                    std::to_string(cams.size()) + " carving cameras",
-                ErrorContext{"", cam.name, std::nullopt, "witness_plates"});
   RefineStats local;
-  std::vector<Witness> witnesses;
-  for (size_t c = 0; c < cams.size(); ++c) {
-    if (witness_plates[c].bgr.empty() || witness_masks[c].empty()) continue;
-    check(witness_plates[c].bgr, CV_8UC3, cams[c].camera, "plate");
-    check(witness_masks[c], CV_8UC1, cams[c].camera, "mask");
-    Witness w;
-    w.rc = &cams[c];
-    w.T_cam_world = cams[c].T_world_cam.inverse();
-    w.bgr = witness_plates[c].bgr;
-    w.gain = witness_plates[c].gain;
-    w.front = visibilityMap(carver, hull, cams[c], witness_masks[c]);
-    witnesses.push_back(std::move(w));
-    local.witnesses_used.push_back(cams[c].camera.name);
-  }
+  const std::vector<Witness> witnesses = makeWitnesses(carver, hull, camera, plate, hull_depth,
+                                                       witness_plates, witness_masks, local);
+  std::vector<const Witness*> refs;
+  for (const Witness& w : witnesses) refs.push_back(&w);
   cv::Mat out = hull_depth.clone();
-  const std::array<float, 256>& lin = srgbToLinear();
-  const double main_gain = plate.gain > 0 ? plate.gain : 1.0;
-  const float main_inv_gain = static_cast<float>(1.0 / main_gain);
+  const float main_inv_gain = static_cast<float>(1.0 / (plate.gain > 0 ? plate.gain : 1.0));
   const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-  const Eigen::Matrix3d R = camera.T_world_cam.linear();
-  const Eigen::Vector3d centre = camera.T_world_cam.translation();
-  estimateGains(camera, plate.bgr, main_gain, hull_depth, witnesses);
-  for (const Witness& w : witnesses) {
-    local.witness_gains.push_back(w.gain);
-    if (w.estimated) {
-      local.gains_estimated.push_back(w.rc->camera.name);
-      local.gain_samples.push_back(w.gain_samples);
-    }
-  }
-  const int n_steps = static_cast<int>(std::floor(options.search_m / options.step_m));
-  const int nw = static_cast<int>(witnesses.size());
-  long long pixels = 0, inconsistent = 0, moved = 0;
+  const ViewCounts n =
+      refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, refs, options, nullptr, threads);
+  local.pixels = n.pixels;
+  local.inconsistent = n.inconsistent;
+  local.moved = n.moved;
+  local.ms = msSince(start);
+  if (stats) *stats = std::move(local);
+  return out;
+}
 
-  // Cost of the point X for the plate colour c: mean of the best_of smallest colour distances
-  // over the witnesses that can see X; +inf when fewer see it. A witness that has X on its own
-  // hull surface (within veto_m) sees X itself if X is matter (the hull holds all of it, so
-  // nothing can hide X from it): its disagreement beyond 'veto' rules X out.
-  auto cost = [&](const Eigen::Vector3d& X, const float* c) {
-    float d[32];
-    double vetoed = 0;
-    int n = 0;
-    for (int i = 0; i < nw && n < 32; ++i) {
-      const Witness& w = witnesses[i];
-      const Eigen::Vector3d q = w.T_cam_world * X;
-      const auto px = w.rc->camera.project(q);
-      if (!px) continue;
-      const int iu = static_cast<int>(std::floor((px->x() + 0.5) / kVisibilityBlock));
-      const int iv = static_cast<int>(std::floor((px->y() + 0.5) / kVisibilityBlock));
-      if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
-      const float front = w.front.at<float>(iv, iu);
-      if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
-      float cw[3];
-      if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
-      d[n] = colourDistance(c, cw);
-      if (q.z() <= front + options.veto_m && d[n] > options.veto)
-        vetoed = std::max(vetoed, static_cast<double>(d[n]));
-      ++n;
-    }
-    if (n < options.best_of) return kInf;
-    std::partial_sort(d, d + options.best_of, d + n);
-    double s = 0;
-    for (int i = 0; i < options.best_of; ++i) s += d[i];
-    return std::max(s / options.best_of, vetoed);
+void PhotoHullOptions::validate() const {
+  refine.validate();
+  auto bad = [](const std::string& field, const std::string& message) {
+    throw Error("photo hull: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
   };
+  if (rounds < 0) bad("rounds", "must be >= 0 (got " + std::to_string(rounds) + ")");
+  if (!(free_m > 0) || !std::isfinite(free_m))
+    bad("free_m", "must be a finite value > 0 (got " + num(free_m) + ")");
+  if (free_views < 1) bad("free_views", "must be >= 1 (got " + std::to_string(free_views) + ")");
+  if (!(hidden_m >= 0) || !std::isfinite(hidden_m))
+    bad("hidden_m", "must be a finite value >= 0 (got " + num(hidden_m) + ")");
+}
 
-#pragma omp parallel for schedule(dynamic, 4) num_threads(threads) reduction(+ : pixels, inconsistent, moved)
-  for (int v = 0; v < cam.height; ++v) {
-    float* row = out.ptr<float>(v);
-    const std::uint8_t* bgr = plate.bgr.ptr<std::uint8_t>(v);
-    for (int u = 0; u < cam.width; ++u) {
-      const double t0 = row[u];
-      if (!std::isfinite(t0)) continue;
-      ++pixels;
-      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
-      if (!ray) continue;
-      const Eigen::Vector3d d = R * (*ray / ray->z());
-      const float c[3] = {main_inv_gain * lin[bgr[3 * u]], main_inv_gain * lin[bgr[3 * u + 1]],
-                          main_inv_gain * lin[bgr[3 * u + 2]]};
-      const double cost0 = cost(centre + t0 * d, c);
-      if (cost0 <= options.agree) continue;
-      ++inconsistent;
-      for (int s = 1; s <= n_steps; ++s) {
-        const double t = t0 + s * options.step_m;
-        const Eigen::Vector3d X = centre + t * d;
-        if (!carver.inside(hull, X)) continue;
-        const double k = cost(X, c);
-        if (k <= options.agree && k <= options.margin * cost0) {
-          row[u] = static_cast<float>(t);
-          ++moved;
-          break;
-        }
-      }
-    }
+cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
+                       const Plate& plate, const cv::Mat& hull_depth,
+                       const std::vector<Plate>& witness_plates,
+                       const std::vector<cv::Mat>& witness_masks,
+                       const PhotoHullOptions& options, PhotoHullStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  PhotoHullStats local;
+  std::vector<int> index;  // carver camera of each witness used
+  std::vector<Witness> views = makeWitnesses(carver, hull, camera, plate, hull_depth,
+                                             witness_plates, witness_masks, local.depth, &index);
+  const int nw = static_cast<int>(views.size());
+  const int threads = options.refine.threads > 0 ? options.refine.threads : omp_get_max_threads();
+  {
+    // The depth camera as the witnesses' reference: its silhouette is where its hull depth is.
+    Witness m;
+    m.rc = &camera;
+    m.T_cam_world = camera.T_world_cam.inverse();
+    m.bgr = plate.bgr;
+    m.gain = plate.gain > 0 ? plate.gain : 1.0;
+    m.inv_gain = static_cast<float>(1.0 / m.gain);
+    cv::Mat mask = hull_depth < std::numeric_limits<float>::infinity();
+    m.front = visibilityMap(carver, hull, camera, mask);
+    views.push_back(std::move(m));
   }
-  local.pixels = pixels;
-  local.inconsistent = inconsistent;
-  local.moved = moved;
-  local.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                 .count();
+  auto setDepth = [](Witness& w, const cv::Mat& depth) {
+    const cv::Mat k = cv::Mat::ones(3, 3, CV_8UC1);
+    cv::erode(depth, w.near_depth, k, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+    cv::dilate(depth, w.far_depth, k, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  };
+  std::vector<const Witness*> main_refs;
+  for (int i = 0; i < nw; ++i) main_refs.push_back(&views[i]);
+  const float main_inv_gain = views[nw].inv_gain;
+  const FreeSpace fs{options.free_m, options.free_views, options.hidden_m};
+
+  cv::Mat out = hull_depth.clone();
+  ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,
+                            options.refine, nullptr, threads);
+  std::vector<cv::Mat> witness_hull(nw);
+  for (int round = 0; round < options.rounds; ++round) {
+    const auto witness_start = std::chrono::steady_clock::now();
+    setDepth(views[nw], out);
+    std::vector<cv::Mat> refined(nw);
+    local.witness_pixels.assign(nw, 0);
+    local.witness_moved.assign(nw, 0);
+    for (int i = 0; i < nw; ++i) {
+      const RigCamera& rc = *views[i].rc;
+      if (witness_hull[i].empty())
+        witness_hull[i] = carver.depth(hull, rc, witness_masks[index[i]]);
+      std::vector<const Witness*> refs;
+      for (int j = 0; j <= nw; ++j)
+        if (j != i) refs.push_back(&views[j]);
+      refined[i] = witness_hull[i].clone();
+      const ViewCounts c = refineView(carver, hull, rc, views[i].bgr, views[i].inv_gain,
+                                      refined[i], refs, options.refine, &fs, threads);
+      local.witness_pixels[i] = c.pixels;
+      local.witness_moved[i] = c.moved;
+    }
+    for (int i = 0; i < nw; ++i) setDepth(views[i], refined[i]);
+    local.witness_ms += msSince(witness_start);
+    out = hull_depth.clone();
+    n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs, options.refine,
+                   &fs, threads);
+  }
+  local.depth.pixels = n.pixels;
+  local.depth.inconsistent = n.inconsistent;
+  local.depth.moved = n.moved;
+  local.free_space = n.free_space;
+  local.ms = local.depth.ms = msSince(start);
   if (stats) *stats = std::move(local);
   return out;
 }

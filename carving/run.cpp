@@ -161,7 +161,10 @@ void RunOptions::validate() const {
                 fieldContext("shard"));
   if (frames.first < 0 || (frames.end >= 0 && frames.end <= frames.first))
     throw Error("carve: frame range must have 0 <= first < end", fieldContext("frames"));
-  if (refine_depth) refine.validate();
+  if (refine_depth) {
+    refine.validate();
+    photo_hull.validate();
+  }
 }
 
 nlohmann::json DepthReport::toJson() const {
@@ -189,8 +192,10 @@ nlohmann::json FrameReport::toJson() const {
           {"refine", refine_source.empty()
                          ? nlohmann::json(nullptr)
                          : nlohmann::json{{"source", refine_source},
+                                          {"method", refine_method},
                                           {"pixels", refine_pixels},
                                           {"moved", refine_moved},
+                                          {"free_space", refine_free_space},
                                           {"witnesses", refine_witnesses},
                                           {"gains_estimated", refine_gains_estimated},
                                           {"ms", refine_ms}}},
@@ -364,22 +369,27 @@ struct CarveJob::Impl {
         witness_plates[j] = Plate{in.plates[j], take.gain(carve_names[j])};
         witness_masks[j] = in.silhouettes[j];
       }
-      RefineStats stats;
-      refined = refineDepth(*carver, hull, take.cameraAt(depth_name, frame),
-                            Plate{in.plates[d], take.gain(depth_name)}, depth, witness_plates,
-                            witness_masks, options.refine, &stats);
+      PhotoHullOptions photo = options.photo_hull;
+      photo.refine = options.refine;
+      PhotoHullStats photo_stats;
+      refined = photoHullDepth(*carver, hull, take.cameraAt(depth_name, frame),
+                               Plate{in.plates[d], take.gain(depth_name)}, depth, witness_plates,
+                               witness_masks, photo, &photo_stats);
+      const RefineStats& stats = photo_stats.depth;
       report.refine_source = "plates";
+      report.refine_method = photo.rounds > 0 ? "photo hull" : "photo-consistency";
       report.refine_pixels = stats.pixels;
       report.refine_moved = stats.moved;
+      report.refine_free_space = photo_stats.free_space;
       report.refine_witnesses = stats.witnesses_used;
       report.refine_gains_estimated = stats.gains_estimated;
-      report.refine_ms = stats.ms;
+      report.refine_ms = photo_stats.ms;
     }
     writeDepthExr(path("depth_refined", frame, ".exr"), refined,
                   {{"previz:camera", depth_name}, {"previz:frame", std::to_string(frame)},
-                   {"previz:source", report.refine_source == "plates"
-                                         ? "visual hull refined by photo-consistency (previz carve --refine)"
-                                         : "visual hull (previz carve --refine: " + report.refine_source + ")"}});
+                   {"previz:source", report.refine_source != "plates"
+                                         ? "visual hull (previz carve --refine: " + report.refine_source + ")"
+                                         : "visual hull refined by " + report.refine_method + " (previz carve --refine)"}});
     writeImageAtomic(path("depth_refined", frame, ".png"), depthPreview(refined, lo, hi));
   }
 };
@@ -463,6 +473,9 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     m.config["refine"] = {{"search_m", r.search_m}, {"step_m", r.step_m}, {"agree", r.agree},
                           {"best_of", r.best_of}, {"visibility_m", r.visibility_m},
                           {"veto", r.veto}, {"veto_m", r.veto_m}, {"margin", r.margin}};
+    const PhotoHullOptions& p = m.options.photo_hull;
+    m.config["refine"]["photo_hull"] = {{"rounds", p.rounds}, {"free_m", p.free_m},
+                                        {"free_views", p.free_views}, {"hidden_m", p.hidden_m}};
   }
 }
 

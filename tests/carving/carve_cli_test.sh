@@ -86,7 +86,7 @@ else fail "unknown depth camera: $(cat "$tmp/baddepth.err")"; fi
 if "$bin" carve "${common[@]}" --masks "$take/truth/masks" --frames 1 --refine --out "$tmp/refined" >/dev/null 2>"$tmp/refined.err" \
    && [ -s "$tmp/refined/depth_refined/000001.exr" ] && [ -s "$tmp/refined/depth_refined/000001.png" ] \
    && [ -s "$tmp/refined/depth/000001.exr" ] \
-   && grep -q '"refine":{"gains_estimated":\[\],"moved":[0-9]*,"ms":[0-9.e+-]*,"pixels":[1-9][0-9]*,"source":"plates","witnesses":\["witness01","witness02","witness03","witness04"\]}' "$tmp/refined/report/000001.json"; then
+   && grep -q '"refine":{"free_space":[0-9]*,"gains_estimated":\[\],"method":"photo hull","moved":[0-9]*,"ms":[0-9.e+-]*,"pixels":[1-9][0-9]*,"source":"plates","witnesses":\["witness01","witness02","witness03","witness04"\]}' "$tmp/refined/report/000001.json"; then
   ok "--refine writes depth_refined/ and reports it"
 else fail "--refine: $(tail -n 3 "$tmp/refined.err") $(head -c 600 "$tmp/refined/report/000001.json" 2>/dev/null)"; fi
 

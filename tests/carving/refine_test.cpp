@@ -79,12 +79,27 @@ Ordering ordering(const cv::Mat& depth, const cv::Mat& truth) {
 }
 
 struct Result {
-  Ordering hull, refined;
+  Ordering hull, refined, photo;  // photo: photoHullDepth (only with photo_hull)
   RefineStats stats;
+  PhotoHullStats photo_stats;
 };
 
-// Carves the frame, takes the hull depth and refines it; prints item 2 for both.
-Result run(const PlateFrame& f, const char* label) {
+// Never nearer than the hull (the actor lies inside it), and finite exactly where it is.
+void expectBeyondHull(const cv::Mat& hull_depth, const cv::Mat& depth, const char* what) {
+  int nearer = 0, finite_mismatch = 0;
+  for (int v = 0; v < hull_depth.rows; ++v)
+    for (int u = 0; u < hull_depth.cols; ++u) {
+      const float h = hull_depth.at<float>(v, u), d = depth.at<float>(v, u);
+      finite_mismatch += std::isfinite(h) != std::isfinite(d);
+      nearer += std::isfinite(h) && d < h;
+    }
+  EXPECT_EQ(nearer, 0) << what;
+  EXPECT_EQ(finite_mismatch, 0) << what;
+}
+
+// Carves the frame, takes the hull depth and refines it (and with photo_hull also by the photo
+// hull); prints item 2 for each.
+Result run(const PlateFrame& f, const char* label, bool photo_hull = false) {
   HullOptions o;
   o.voxel_m = 0.005;
   Carver carver(f.studio.witnesses, o);
@@ -100,32 +115,49 @@ Result run(const PlateFrame& f, const char* label) {
   r.refined = ordering(refined, truth);
   std::printf("%s: %lld pixels, %lld not photo-consistent at the hull, %lld moved deeper, %.0f ms\n",
               label, r.stats.pixels, r.stats.inconsistent, r.stats.moved, r.stats.ms);
-  for (int i = 0; i < 3; ++i)
-    std::printf("  plane %2.0f cm in front: hull %.3f %%, refined %.3f %% | %2.0f cm behind: hull "
-                "%.3f %%, refined %.3f %%\n",
-                100 * kPlanes[i], 100 * r.hull.front[i], 100 * r.refined.front[i],
-                100 * kPlanes[i], 100 * r.hull.behind[i], 100 * r.refined.behind[i]);
-  // Never nearer than the hull (the actor lies inside it), and finite exactly where it is.
-  int nearer = 0, finite_mismatch = 0;
-  for (int v = 0; v < hull_depth.rows; ++v)
-    for (int u = 0; u < hull_depth.cols; ++u) {
-      const float h = hull_depth.at<float>(v, u), d = refined.at<float>(v, u);
-      finite_mismatch += std::isfinite(h) != std::isfinite(d);
-      nearer += std::isfinite(h) && d < h;
-    }
-  EXPECT_EQ(nearer, 0);
-  EXPECT_EQ(finite_mismatch, 0);
+  cv::Mat photo;
+  if (photo_hull) {
+    photo = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth, f.witness_plates,
+                           f.studio.masks, PhotoHullOptions{}, &r.photo_stats);
+    r.photo = ordering(photo, truth);
+    std::printf("  photo hull: %lld pixels with free space at the hull entry, %lld moved deeper, "
+                "%.0f ms per frame (CPU, %.0f ms of it refining the witnesses)\n",
+                r.photo_stats.free_space, r.photo_stats.depth.moved, r.photo_stats.ms,
+                r.photo_stats.witness_ms);
+  }
+  for (int i = 0; i < 3; ++i) {
+    std::printf("  plane %2.0f cm in front: hull %.3f %%, refined %.3f %%", 100 * kPlanes[i],
+                100 * r.hull.front[i], 100 * r.refined.front[i]);
+    if (photo_hull) std::printf(", photo hull %.3f %%", 100 * r.photo.front[i]);
+    std::printf(" | behind: hull %.3f %%, refined %.3f %%", 100 * r.hull.behind[i],
+                100 * r.refined.behind[i]);
+    if (photo_hull) std::printf(", photo hull %.3f %%", 100 * r.photo.behind[i]);
+    std::printf("\n");
+  }
+  expectBeyondHull(hull_depth, refined, "refineDepth");
   EXPECT_EQ(r.stats.witnesses_used.size(), f.studio.witnesses.size());
+  if (photo_hull) {
+    expectBeyondHull(hull_depth, photo, "photoHullDepth");
+    EXPECT_EQ(r.photo_stats.depth.witnesses_used.size(), f.studio.witnesses.size());
+    EXPECT_EQ(r.photo_stats.witness_moved.size(), f.studio.witnesses.size());
+  }
   return r;
 }
 
 // t = 4 s, the frame of item 1 (walking along the back of the stage, seen from the side): the
 // hull puts 1.6 % of the actor pixels more than 10 cm in front (the creases between arms and
 // torso and at the hips, that every silhouette contains). Photo-consistency takes the goal:
-// measured 99.68 % in front, 99.83 % behind at 10 cm.
+// measured 99.68 % in front, 99.83 % behind at 10 cm; the photo hull 99.72 % / 99.85 % (5 cm in
+// front: 96.40 % -> 97.22 %).
 TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
   const PlateFrame f = makePlateFrame(4.0);
-  const Result r = run(f, "t = 4 s");
+  const Result r = run(f, "t = 4 s", true);
+  EXPECT_GE(r.photo.front[1], 0.995);
+  EXPECT_GE(r.photo.behind[1], 0.995);
+  EXPECT_GE(r.photo.front[2], 0.999);
+  EXPECT_GE(r.photo.behind[2], 0.999);
+  EXPECT_GE(r.photo.front[0], r.refined.front[0] + 0.005);
+  EXPECT_GE(r.photo.behind[0], r.refined.behind[0] - 0.0005);
   EXPECT_LT(r.hull.front[1], 0.99);  // the hull alone misses the goal here (so this can fail)
   EXPECT_GE(r.refined.front[1], 0.995);
   EXPECT_GE(r.refined.behind[1], 0.995);
@@ -164,21 +196,52 @@ TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
 // beside the backpack, 8.5 % of the pixels more than 10 cm in front) and t = 2.5 s (7.0 %). The
 // red sleeve in front of the red shirt and the dark legs side by side are the same colour in
 // every witness, so much of the air in their creases is photo-consistent too and stays.
-// Measured at 10 cm in front: t = 7 s 91.46 % -> 95.25 %, t = 2.5 s 93.03 % -> 98.83 %;
-// asserted as regression bounds, with behind kept >= 99.5 %.
+// Measured at 10 cm in front, hull -> refineDepth -> photoHullDepth: t = 7 s 91.46 % -> 95.25 %
+// -> 95.33 %, t = 2.5 s 93.03 % -> 98.83 % -> 99.19 % (5 cm: 90.88 -> 91.14 %, 91.45 -> 94.18 %);
+// behind at 10 cm 99.76 % and 99.78 % for both. The photo hull carves only the air some witness's
+// own refinement looks through; with the witnesses' TRUE depths instead of their refined ones it
+// would reach 98.06 % at t = 7 s (measured): the rest of the crease air is seen through by no
+// witness. Asserted as regression bounds, with behind kept >= 99.5 %.
 TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
   struct Case {
-    double time_s, front_10cm;
+    double time_s, front_10cm, photo_front_10cm;
   };
-  for (const Case c : {Case{7.0, 0.95}, Case{2.5, 0.985}}) {
+  for (const Case c : {Case{7.0, 0.95, 0.953}, Case{2.5, 0.985, 0.99}}) {
     const PlateFrame f = makePlateFrame(c.time_s);
     const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
-    const Result r = run(f, label.c_str());
+    const Result r = run(f, label.c_str(), true);
     EXPECT_GE(r.refined.front[1], c.front_10cm) << label;
     EXPECT_GE(r.refined.front[1], r.hull.front[1] + 0.035) << label;
     EXPECT_GE(r.refined.behind[1], 0.995) << label;
     EXPECT_GE(r.refined.front[2], r.hull.front[2]) << label;
     EXPECT_GE(r.refined.behind[2], 0.998) << label;
+    EXPECT_GE(r.photo.front[1], c.photo_front_10cm) << label;
+    EXPECT_GE(r.photo.front[0], r.refined.front[0]) << label;
+    EXPECT_GE(r.photo.front[2], r.refined.front[2]) << label;
+    for (int i = 0; i < 3; ++i) EXPECT_GE(r.photo.behind[i], r.refined.behind[i] - 0.0005) << label;
+    EXPECT_GE(r.photo.behind[1], 0.995) << label;
+  }
+}
+
+// Other frames, so that the photo hull is not tuned to the three above. Measured at 10 cm in
+// front (hull / refineDepth / photoHullDepth): t = 1 s 95.05 / 98.30 / 98.76 %, t = 5.5 s
+// 100 / 100 / 100 %, t = 8.5 s 95.61 / 98.92 / 99.19 %; 10 cm behind 99.83 %, 99.60 %, 99.77 %
+// for both refinements; 5 cm behind within 0.01 point of refineDepth's (99.56 / 99.58 %,
+// 99.33 / 99.33 %, 99.27 / 99.26 %).
+TEST(RefineDepth, PhotoHullImprovesOtherFramesWithoutPushingBehind) {
+  struct Case {
+    double time_s, photo_front_10cm;
+  };
+  for (const Case c : {Case{1.0, 0.985}, Case{5.5, 0.999}, Case{8.5, 0.99}}) {
+    const PlateFrame f = makePlateFrame(c.time_s);
+    const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
+    const Result r = run(f, label.c_str(), true);
+    EXPECT_GE(r.photo.front[1], c.photo_front_10cm) << label;
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_GE(r.photo.front[i], r.refined.front[i]) << label << " " << i;
+      EXPECT_GE(r.photo.behind[i], r.refined.behind[i] - 0.0005) << label << " " << i;
+    }
+    EXPECT_GE(r.photo.behind[1], 0.995) << label;
   }
 }
 
@@ -192,6 +255,15 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   o = RefineOptions{};
   o.best_of = 0;
   EXPECT_THROW(o.validate(), Error);
+  PhotoHullOptions p;
+  p.free_views = 0;
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.refine.step_m = -1;
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.free_m = 0;
+  EXPECT_THROW(p.validate(), Error);
 
   const StudioFrame f = makeStudioFrame(4.0, 320, 180);
   Carver carver(f.witnesses, HullOptions{});
@@ -220,6 +292,24 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   EXPECT_GT(stats.pixels, 100);
   EXPECT_EQ(stats.moved, 0);
   EXPECT_EQ(cv::countNonZero(same != depth), 0);
+  EXPECT_THROW(photoHullDepth(carver, hull, f.main, wrong_size, depth, plates, f.masks), Error);
+  EXPECT_THROW(photoHullDepth(carver, hull, f.main, main, depth, too_few, f.masks), Error);
+  // No rounds: the photo hull is refineDepth, bit for bit.
+  PhotoHullOptions no_rounds;
+  no_rounds.rounds = 0;
+  PhotoHullStats photo_stats;
+  const cv::Mat photo =
+      photoHullDepth(carver, hull, f.main, main, depth, plates, f.masks, no_rounds, &photo_stats);
+  EXPECT_EQ(photo_stats.depth.moved, 0);
+  EXPECT_EQ(cv::countNonZero(photo != same), 0);
+  // (With rounds the green witnesses refine each other and carve free space the red plate
+  // cannot contradict, so here the photo hull does move pixels; never nearer than the hull.)
+  const cv::Mat carved = photoHullDepth(carver, hull, f.main, main, depth, plates, f.masks);
+  int nearer = 0;
+  for (int v = 0; v < depth.rows; ++v)
+    for (int u = 0; u < depth.cols; ++u)
+      nearer += std::isfinite(depth.at<float>(v, u)) && carved.at<float>(v, u) < depth.at<float>(v, u);
+  EXPECT_EQ(nearer, 0);
 }
 
 }  // namespace

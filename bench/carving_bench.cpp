@@ -1,9 +1,9 @@
 // Carving benchmark (issue 5, item 4): one studio frame, 8 witnesses 1280x720 + main 1920x1080
 // rendered by the synthetic studio (t = 4 s, 4 spp), then in this process: keying per camera,
-// carving at 1 cm and 5 mm, main-view depth, mesh extraction, and a dense-grid carve at the same
-// 1 cm cell size (cell centres projected through each camera's true lens into its silhouette,
-// early exit on the first camera that carves: the plain visual-hull loop, as cheap per cell as
-// it gets). Carving and depth use the renderer's true masks (pixel-centre ray hits the actor),
+// carving at 1 cm and 5 mm, main-view depth (hull, refined, photo hull), mesh extraction, and a
+// dense-grid carve at the same 1 cm cell size (cell centres projected through each camera's true
+// lens into its silhouette, early exit on the first camera that carves: the plain visual-hull
+// loop, as cheap per cell as it gets). Carving and depth use the renderer's true masks (pixel-centre ray hits the actor),
 // so that their figures do not move with the keyer's; the keyer is timed on the rendered plates
 // and its silhouettes' IoU against the true foreground (actor and props: the keyer keys both) is
 // printed.
@@ -270,6 +270,33 @@ void BM_RefineDepth(benchmark::State& state) {
     benchmark::DoNotOptimize(d.data);
   }
 }
+// What `previz carve --refine` runs: the photo hull (every witness refined too, then free space).
+void BM_PhotoHull(benchmark::State& state) {
+  const double voxel = state.range(0) / 1000.0;
+  const int threads = benchThreads(state);
+  CarveCase& c = carveCase(voxel, threads);
+  const Frame& f = frame();
+  const cv::Mat hull_depth = c.carver->depth(c.hull, f.main, f.main_truth);
+  std::vector<Plate> plates;
+  for (const cv::Mat& p : f.plates) plates.push_back(Plate{p, 1.0});
+  PhotoHullOptions o;
+  o.refine.threads = threads;
+  photoHullDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth, plates,
+                 f.truth_masks, o);  // warm: the witnesses' ray tables
+  for (auto _ : state) {
+    const Stopwatch sw;
+    PhotoHullStats stats;
+    cv::Mat d = photoHullDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth,
+                               plates, f.truth_masks, o, &stats);
+    char extra[160];
+    std::snprintf(extra, sizeof extra,
+                  "\"voxel_m\":%.3f,\"pixels\":%lld,\"moved\":%lld,\"free_space\":%lld,\"witness_ms\":%.1f",
+                  voxel, stats.depth.pixels, stats.depth.moved, stats.free_space, stats.witness_ms);
+    record("4s_photo_hull_" + voxelLabel(voxel) + threadKey(threads), "main_depth_photo_hull",
+           "1920x1080+8x1280x720@" + voxelLabel(voxel), sw, -1, threads, extra);
+    benchmark::DoNotOptimize(d.data);
+  }
+}
 void BM_Mesh(benchmark::State& state) {
   const double voxel = state.range(0) / 1000.0;
   const int threads = benchThreads(state);
@@ -378,6 +405,7 @@ BENCHMARK(BM_KeyMain)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)
 BENCHMARK(BM_Carve)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_Depth)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_RefineDepth)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
+BENCHMARK(BM_PhotoHull)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_Mesh)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_DenseCarve)->ArgsProduct({{10}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 

@@ -31,7 +31,7 @@ struct BatchArgs {
   std::string rig, props, main_poses, quality = "preview", depth_cameras = "all", out;
   double voxel_m = 0, point_spacing_m = -1;
   int frames_per_shard = 0, shards_per_take = 0, threads = 0;
-  bool force = false;
+  bool force = false, refine = false, no_refine = false;
   // submit / resume / status / collect / task
   std::string job;
   bool local = false, slurm = false, wait = false;
@@ -66,6 +66,12 @@ int runPlan(const BatchArgs& a) {
   o.main_poses = a.main_poses;
   o.quality = a.quality;
   o.depth_cameras = a.depth_cameras;
+  if (a.refine && a.no_refine) {
+    ErrorContext c;
+    c.field = "--refine";
+    throw Error("batch plan: --refine or --no-refine, not both", c);
+  }
+  o.refine = a.refine ? 1 : a.no_refine ? 0 : -1;
   o.voxel_m = a.voxel_m;
   o.point_spacing_m = a.point_spacing_m;
   o.frames_per_shard = a.frames_per_shard;
@@ -359,6 +365,9 @@ Runner addBatchCommand(CLI::App& app) {
   plan->add_option("--depth-cameras", a->depth_cameras,
                    "Cameras besides the main one with depth sequences: all | main (none more) | a,b,c")
       ->capture_default_str();
+  plan->add_flag("--refine", a->refine,
+                 "Also the main camera's refined depth (carve --refine, photo hull); default with post");
+  plan->add_flag("--no-refine", a->no_refine, "No refined depth, also with post");
   plan->add_option("--out", a->out, "Job folder")->required();
   plan->add_flag("--force", a->force, "Replace a different plan in --out (its outputs are removed)");
   plan->add_flag("--json", a->json, "Print a JSON summary on stdout");

@@ -243,6 +243,15 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
           depth_links += std::string(depth_links.empty() ? "" : " ") + "<a href=\"" +
                          htmlEscape(take.name + "/" + exr) + "\">" + htmlEscape(cam) + "</a>";
         }
+        // The main camera's refined layer (plan --refine, default with post).
+        if (m.settings.value("refine", false)) {
+          const std::string& cam = take.main_camera;
+          const std::string exr = "depth_refined/" + cam + "/" + sequenceName(cam, out_frame, "exr");
+          copyAtomic(carve / "depth_refined" / (stem + ".exr"), td / exr);
+          entry["depth_refined"] = {{cam, exr}};
+          depth_links += " <a href=\"" + htmlEscape(take.name + "/" + exr) + "\">" + htmlEscape(cam) +
+                         " refined</a>";
+        }
         previews.push_back({f, carve / "depth" / (stem + ".png")});
       } else {
         previews.push_back({f, fs::path()});

@@ -107,9 +107,15 @@ StagePlan carveStage(const Manifest& m, const TakePlan& take) {
     s.command.push_back("--depth-cameras");
     s.command.push_back(list);
   }
+  const bool refine = m.settings.value("refine", false) && !take.main_camera.empty();
+  if (refine) s.command.push_back("--refine");
   if (!take.main_camera.empty()) {
     s.outputs.push_back(out + "/depth/{frame}.exr");
     s.outputs.push_back(out + "/depth/{frame}.png");
+  }
+  if (refine) {
+    s.outputs.push_back(out + "/depth_refined/{frame}.exr");
+    s.outputs.push_back(out + "/depth_refined/{frame}.png");
   }
   for (const std::string& name : take.depth_cameras) {
     s.outputs.push_back(out + "/depth_cameras/" + name + "/{frame}.exr");
@@ -250,12 +256,14 @@ Manifest planBatch(const PlanOptions& options) {
   const double voxel_m = options.voxel_m > 0 ? options.voxel_m : (post ? 0.005 : 0.02);
   const double spacing_m = options.point_spacing_m >= 0 ? options.point_spacing_m : (post ? 0.005 : 0.0);
   const int per_shard = options.frames_per_shard > 0 ? options.frames_per_shard : (post ? 5 : 20);
+  const bool refine = options.refine < 0 ? post : options.refine > 0;
   m.settings = {{"voxel_m", voxel_m},
                 {"point_spacing_m", spacing_m},
                 {"frames_per_shard", per_shard},
                 {"shards_per_take", options.shards_per_take},
                 {"threads", options.threads},
                 {"depth_cameras", options.depth_cameras},
+                {"refine", refine},
                 {"stages", m.props.empty() ? nlohmann::json{"carve"} : nlohmann::json{"carve", "track"}}};
 
   const Rig rig = readRig(m.rig);

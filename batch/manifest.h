@@ -28,6 +28,9 @@ struct PlanOptions {
   // Cameras besides the main one whose hull depth sequence is written (carve --depth-cameras):
   // "all" = every rig camera, "main" = none more, or names a,b,c.
   std::string depth_cameras = "all";
+  // The main camera's refined depth layer too (carve --refine: photo hull, depth_refined/):
+  // -1 = the quality's (post: yes, preview: no), 0 = no, 1 = yes.
+  int refine = -1;
   std::filesystem::path out;        // JOBDIR
   std::filesystem::path previz;     // the previz executable tasks run (absolute)
   void validate() const;            // throws Error naming the field

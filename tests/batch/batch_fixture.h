@@ -1,6 +1,6 @@
 #pragma once
 // One small batch shared by every batch test process (CTest runs each test in its own process):
-// a 4-frame studio take (4 witnesses at 320x180), planned as 2 shards at 0.02 m cells, run by
+// a 4-frame studio take (4 witnesses at 320x180), planned as 2 shards at 0.02 m cells with refined depth, run by
 // the local backend with 2 jobs and collected with --y-up. Built once per previz binary under
 // PREVIZ_TEST_TMP/batch_fixture (an flock serialises the first build); tests that change files
 // work on copies in their own scratch folder.
@@ -65,7 +65,7 @@ inline const BatchFixture& batchFixture() {
           bin + " synth --preset studio --out " + quoted(b.take) +
               " --frames 4 --cams 4 --size 320x180 --no-meshes --quiet",
           bin + " batch plan --takes " + quoted(b.take) + " --rig " + quoted(b.take / "truth" / "rig.json") +
-              " --quality preview --shards-per-take 2 --out " + quoted(b.job),
+              " --quality preview --refine --shards-per-take 2 --out " + quoted(b.job),
           bin + " batch submit " + quoted(b.job) + " --local --jobs 2 --quiet",
           bin + " batch collect " + quoted(b.job) + " --y-up --out " + quoted(b.collected)};
       for (const std::string& s : steps) {

@@ -136,7 +136,9 @@ TEST(BatchLedger, DamagedFrameIsRedoneLocallyAndNothingElseIsRewritten) {
       EXPECT_EQ(t, before.at(path)) << path << " was rewritten";
     }
   }
-  EXPECT_EQ(rewritten, 15);  // depth exr + png of main and 4 witnesses, mesh ply + obj, points ply + pcd, report
+  // Depth exr + png of main and 4 witnesses, refined depth exr + png, mesh ply + obj, points ply
+  // + pcd, report.
+  EXPECT_EQ(rewritten, 17);
   EXPECT_EQ(readTextFile(obj), original) << "the redone OBJ equals the first run's";
   for (const ShardPlan& s : m.shards) EXPECT_TRUE(checkShard(m, s.id).complete()) << "shard " << s.id;
 }

@@ -400,9 +400,36 @@ void PhotoHullOptions::validate() const {
   if (!(free_m > 0) || !std::isfinite(free_m))
     bad("free_m", "must be a finite value > 0 (got " + num(free_m) + ")");
   if (free_views < 1) bad("free_views", "must be >= 1 (got " + std::to_string(free_views) + ")");
+  if (witness_stride < 1 || witness_stride > 8)
+    bad("witness_stride", "must be 1 to 8 (got " + std::to_string(witness_stride) + ")");
   if (!(hidden_m >= 0) || !std::isfinite(hidden_m))
     bad("hidden_m", "must be a finite value >= 0 (got " + num(hidden_m) + ")");
 }
+
+namespace {
+
+// The mask's pixels at every stride-th row and column (stride 1: the mask itself).
+cv::Mat strideMask(const cv::Mat& mask, int stride) {
+  if (stride <= 1) return mask;
+  cv::Mat out = cv::Mat::zeros(mask.size(), CV_8UC1);
+  for (int v = 0; v < mask.rows; v += stride)
+    for (int u = 0; u < mask.cols; u += stride) out.at<std::uint8_t>(v, u) = mask.at<std::uint8_t>(v, u);
+  return out;
+}
+
+// Each stride x stride block takes the depth of its top-left pixel where the mask is set.
+void spreadBlocks(cv::Mat& depth, const cv::Mat& mask, int stride) {
+  if (stride <= 1) return;
+  for (int v = 0; v < depth.rows; ++v) {
+    float* row = depth.ptr<float>(v);
+    const float* anchor = depth.ptr<float>(v - v % stride);
+    const std::uint8_t* m = mask.ptr<std::uint8_t>(v);
+    for (int u = 0; u < depth.cols; ++u)
+      if ((v % stride || u % stride) && m[u] > 127) row[u] = anchor[u - u % stride];
+  }
+}
+
+}  // namespace
 
 cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
                        const Plate& plate, const cv::Mat& hull_depth,
@@ -443,6 +470,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,
                             options.refine, nullptr, threads);
   std::vector<cv::Mat> witness_hull(nw);
+  const int stride = options.witness_stride;
   for (int round = 0; round < options.rounds; ++round) {
     const auto witness_start = std::chrono::steady_clock::now();
     setDepth(views[nw], out);
@@ -452,13 +480,14 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
     for (int i = 0; i < nw; ++i) {
       const RigCamera& rc = *views[i].rc;
       if (witness_hull[i].empty())
-        witness_hull[i] = carver.depth(hull, rc, witness_masks[index[i]]);
+        witness_hull[i] = carver.depth(hull, rc, strideMask(witness_masks[index[i]], stride));
       std::vector<const Witness*> refs;
       for (int j = 0; j <= nw; ++j)
         if (j != i) refs.push_back(&views[j]);
       refined[i] = witness_hull[i].clone();
       const ViewCounts c = refineView(carver, hull, rc, views[i].bgr, views[i].inv_gain,
                                       refined[i], refs, options.refine, &fs, threads);
+      spreadBlocks(refined[i], witness_masks[index[i]], stride);
       local.witness_pixels[i] = c.pixels;
       local.witness_moved[i] = c.moved;
     }

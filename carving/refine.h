@@ -103,6 +103,11 @@ struct PhotoHullOptions {
   double free_m = 0.03;   // a witness sees through a point its refined depth is this far behind
   int free_views = 1;     // ... and this many such witnesses make the point air (2: no gain)
   double hidden_m = 0;    // > 0: a point this far behind a witness's refined depth is hidden
+  // The witnesses' depth is refined at every witness_stride-th pixel in each direction and
+  // spread over the block (free space needs it to a few cm; 1 = every pixel). Measured on the
+  // bench frame (bench_carving, one thread): 984 -> 605 ms CPU a call (witnesses 785 -> 373 ms);
+  // on the six test frames the ordering figures move by at most +0.3 / -0.02 point.
+  int witness_stride = 2;
   void validate() const;  // throws Error naming the field (the refine fields as refineDepth's)
 };
 

@@ -475,7 +475,8 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
                           {"veto", r.veto}, {"veto_m", r.veto_m}, {"margin", r.margin}};
     const PhotoHullOptions& p = m.options.photo_hull;
     m.config["refine"]["photo_hull"] = {{"rounds", p.rounds}, {"free_m", p.free_m},
-                                        {"free_views", p.free_views}, {"hidden_m", p.hidden_m}};
+                                        {"free_views", p.free_views}, {"hidden_m", p.hidden_m},
+                                        {"witness_stride", p.witness_stride}};
   }
 }
 

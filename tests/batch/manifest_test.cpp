@@ -54,6 +54,31 @@ TEST(BatchManifest, ShardsCoverEveryFrameOnceAndCommandsCarryTheShard) {
   EXPECT_EQ(back.shards.size(), 3u);
   EXPECT_EQ(back.shards[2].frames, m.shards[2].frames);
   EXPECT_EQ(arrayList({7, 0, 1, 2, 5, 8}), "0-2,5,7-8");
+
+  // Depth cameras: all but the main camera by default, a list as given, and an unknown one is
+  // refused, named.
+  EXPECT_EQ(m.takes[0].depth_cameras,
+            (std::vector<std::string>{"witness01", "witness02", "witness03", "witness04"}));
+  PlanOptions listed = o;
+  listed.depth_cameras = "witness03,main";
+  const Manifest l = planBatch(listed);
+  EXPECT_EQ(l.takes[0].depth_cameras, std::vector<std::string>{"witness03"});
+  const std::vector<std::string>& argv = l.takes[0].stages[0].command;
+  const auto it = std::find(argv.begin(), argv.end(), "--depth-cameras");
+  ASSERT_NE(it, argv.end());
+  EXPECT_EQ(*(it + 1), "witness03");
+  PlanOptions none = o;
+  none.depth_cameras = "main";
+  EXPECT_TRUE(planBatch(none).takes[0].depth_cameras.empty());
+  PlanOptions unknown = o;
+  unknown.depth_cameras = "witness09";
+  try {
+    planBatch(unknown);
+    ADD_FAILURE() << "an unknown depth camera was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("witness09"), std::string::npos) << e.what();
+    EXPECT_EQ(e.context().field, "--depth-cameras");
+  }
 }
 
 TEST(BatchManifest, ChangedRigBetweenPlanAndResumeIsRefusedNamingTheFile) {

@@ -2,6 +2,7 @@
 // naming the file (issue 9, item 3); the ledger sends a damaged frame, and only it, back to carve.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <set>
 
 #include "batch/backend.h"

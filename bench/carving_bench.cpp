@@ -245,23 +245,34 @@ void BM_Depth(benchmark::State& state) {
 // Depth beyond the hull (refine.h) on the same frame: the plates (every gain 1 in this render),
 // the hull depth of BM_Depth; includes the witnesses' quarter-size visibility maps. The first
 // call (ray tables of those quarter-size lenses, once per lens) is left out.
+// What both refinements start from: the frame's carve, its hull depth and its plates.
+struct RefineInput {
+  CarveCase& c;
+  const Frame& f;
+  cv::Mat hull_depth;
+  std::vector<Plate> plates;
+  Plate main;
+};
+RefineInput refineInput(double voxel, int threads) {
+  CarveCase& c = carveCase(voxel, threads);
+  const Frame& f = frame();
+  RefineInput in{c, f, c.carver->depth(c.hull, f.main, f.main_truth), {}, Plate{f.main_plate, 1.0}};
+  for (const cv::Mat& p : f.plates) in.plates.push_back(Plate{p, 1.0});
+  return in;
+}
 void BM_RefineDepth(benchmark::State& state) {
   const double voxel = state.range(0) / 1000.0;
   const int threads = benchThreads(state);
-  CarveCase& c = carveCase(voxel, threads);
-  const Frame& f = frame();
-  const cv::Mat hull_depth = c.carver->depth(c.hull, f.main, f.main_truth);
-  std::vector<Plate> plates;
-  for (const cv::Mat& p : f.plates) plates.push_back(Plate{p, 1.0});
+  const RefineInput in = refineInput(voxel, threads);
   RefineOptions o;
   o.threads = threads;
-  refineDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth, plates,
-              f.truth_masks, o);
+  refineDepth(*in.c.carver, in.c.hull, in.f.main, in.main, in.hull_depth, in.plates,
+              in.f.truth_masks, o);
   for (auto _ : state) {
     const Stopwatch sw;
     RefineStats stats;
-    cv::Mat d = refineDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth,
-                            plates, f.truth_masks, o, &stats);
+    cv::Mat d = refineDepth(*in.c.carver, in.c.hull, in.f.main, in.main, in.hull_depth, in.plates,
+                            in.f.truth_masks, o, &stats);
     char extra[128];
     std::snprintf(extra, sizeof extra, "\"voxel_m\":%.3f,\"pixels\":%lld,\"inconsistent\":%lld,\"moved\":%lld",
                   voxel, stats.pixels, stats.inconsistent, stats.moved);
@@ -274,20 +285,16 @@ void BM_RefineDepth(benchmark::State& state) {
 void BM_PhotoHull(benchmark::State& state) {
   const double voxel = state.range(0) / 1000.0;
   const int threads = benchThreads(state);
-  CarveCase& c = carveCase(voxel, threads);
-  const Frame& f = frame();
-  const cv::Mat hull_depth = c.carver->depth(c.hull, f.main, f.main_truth);
-  std::vector<Plate> plates;
-  for (const cv::Mat& p : f.plates) plates.push_back(Plate{p, 1.0});
+  const RefineInput in = refineInput(voxel, threads);
   PhotoHullOptions o;
   o.refine.threads = threads;
-  photoHullDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth, plates,
-                 f.truth_masks, o);  // warm: the witnesses' ray tables
+  photoHullDepth(*in.c.carver, in.c.hull, in.f.main, in.main, in.hull_depth, in.plates,
+                 in.f.truth_masks, o);  // warm: the witnesses' ray tables
   for (auto _ : state) {
     const Stopwatch sw;
     PhotoHullStats stats;
-    cv::Mat d = photoHullDepth(*c.carver, c.hull, f.main, Plate{f.main_plate, 1.0}, hull_depth,
-                               plates, f.truth_masks, o, &stats);
+    cv::Mat d = photoHullDepth(*in.c.carver, in.c.hull, in.f.main, in.main, in.hull_depth,
+                               in.plates, in.f.truth_masks, o, &stats);
     char extra[160];
     std::snprintf(extra, sizeof extra,
                   "\"voxel_m\":%.3f,\"pixels\":%lld,\"moved\":%lld,\"free_space\":%lld,\"witness_ms\":%.1f",

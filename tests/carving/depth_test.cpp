@@ -103,21 +103,6 @@ TEST(HullDepth, WithinThreeMillimetresOfExactHull) {
   EXPECT_LT(worst, 0.002);
 }
 
-// Fraction of true actor pixels where 'depth' keeps the actor on the right side of a virtual
-// plane at distance d in front of (front = true) or behind its true surface.
-double orderedFraction(const cv::Mat& depth, const cv::Mat& truth, double d, bool front) {
-  int n = 0, ok = 0;
-  for (int v = 0; v < truth.rows; ++v)
-    for (int u = 0; u < truth.cols; ++u) {
-      const double z = truth.at<float>(v, u);
-      if (!std::isfinite(z)) continue;
-      const double ours = depth.at<float>(v, u);
-      ++n;
-      ok += front ? ours > z - d : ours < z + d;
-    }
-  return double(ok) / n;
-}
-
 // Item 2: a virtual plane 5, 10, 20 cm in front of / behind the true surface, per pixel: is the
 // actor put on the right side of it (what depth compositing against CG needs)? The visual hull
 // is a superset of the actor, so in-front planes are the hard case, and how hard depends on the

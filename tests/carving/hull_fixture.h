@@ -114,6 +114,22 @@ struct ReferenceHull {
   }
 };
 
+// Fraction of true actor pixels ('truth' finite) where 'depth' keeps the actor on the right side
+// of a virtual plane at distance d in front of (front = true) or behind its true surface
+// (issue 5, item 2).
+inline double orderedFraction(const cv::Mat& depth, const cv::Mat& truth, double d, bool front) {
+  int n = 0, ok = 0;
+  for (int v = 0; v < truth.rows; ++v)
+    for (int u = 0; u < truth.cols; ++u) {
+      const double z = truth.at<float>(v, u);
+      if (!std::isfinite(z)) continue;
+      const double ours = depth.at<float>(v, u);
+      ++n;
+      ok += front ? ours > z - d : ours < z + d;
+    }
+  return double(ok) / n;
+}
+
 // A pixel's ray through a camera's true lens: point(t) = origin + t dir with t = camera z.
 struct PixelRay {
   Eigen::Vector3d origin, dir;

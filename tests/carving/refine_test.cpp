@@ -71,21 +71,6 @@ PlateFrame makePlateFrame(double time_s) {
   return f;
 }
 
-// Fraction of true actor pixels where 'depth' keeps the actor on the right side of a plane at
-// distance d in front of (front = true) or behind its true surface.
-double orderedFraction(const cv::Mat& depth, const cv::Mat& truth, double d, bool front) {
-  int n = 0, ok = 0;
-  for (int v = 0; v < truth.rows; ++v)
-    for (int u = 0; u < truth.cols; ++u) {
-      const double z = truth.at<float>(v, u);
-      if (!std::isfinite(z)) continue;
-      const double ours = depth.at<float>(v, u);
-      ++n;
-      ok += front ? ours > z - d : ours < z + d;
-    }
-  return double(ok) / n;
-}
-
 struct Ordering {
   double front[3], behind[3];  // at 5, 10, 20 cm
 };

@@ -8,7 +8,6 @@
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
 // depth previews, the front/behind layer and the stage timings. Layout: docs/formats.md.
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <chrono>
 #include <map>
@@ -39,6 +38,7 @@
 #include "multicam/rig_calib.h"
 #include "multicam/rig_picture.h"
 #include "tracking/props.h"
+#include "tracking/run.h"
 #include "tracking/tracker.h"
 
 namespace previz::app {
@@ -291,19 +291,6 @@ struct RunResult {
   std::vector<double> prop_err_mm, prop_err_deg;
 };
 
-// truth/props.jsonl: frame -> prop id -> T_world_prop.
-std::map<int, std::map<int, Pose>> readTrueProps(const fs::path& file) {
-  std::map<int, std::map<int, Pose>> out;
-  if (!fs::exists(file)) return out;
-  std::ifstream in(file);
-  for (std::string line; std::getline(in, line);) {
-    if (line.empty()) continue;
-    const nlohmann::json j = nlohmann::json::parse(line);
-    for (const auto& p : j.at("props")) out[j.at("frame").get<int>()][p.at("id").get<int>()] = poseFromJson(p.at("T_world_prop"));
-  }
-  return out;
-}
-
 double medianOf(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -335,7 +322,9 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
       props->addTo(loop);
     }
   }
-  const auto true_props = readTrueProps(take_dir / "truth" / "props.jsonl");
+  const fs::path props_truth = take_dir / "truth" / "props.jsonl";
+  const auto true_props = fs::exists(props_truth) ? tracking::readPropTruth(props_truth)
+                                                  : std::map<int, std::map<int, Pose>>{};
   std::string prop_lines;
   composite::OutputOptions oo;
   oo.out = out;

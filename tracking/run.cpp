@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <regex>
 #include <sstream>
 
@@ -48,9 +49,11 @@ double takeFps(const fs::path& take, double given) {
   return 24.0;
 }
 
-// truth/props.jsonl: frame -> prop id -> T_world_prop.
-std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
-  std::map<int, std::map<int, Pose>> out;
+// Every non-empty line of a JSON lines file, parsed and checked to be an object with an integer
+// "frame" and 'key', handed to 'line' with a context naming the file and line. A malformed line,
+// or an Error thrown by 'line', is an Error naming them ('expected' says what a line holds).
+void forEachFrameLine(const fs::path& path, const std::string& key, const std::string& expected,
+                      const std::function<void(const nlohmann::json&, const ErrorContext&)>& line_fn) {
   std::istringstream in(readTextFile(path));
   int line_no = 0;
   for (std::string line; std::getline(in, line);) {
@@ -61,19 +64,14 @@ std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
     c.field = "line " + std::to_string(line_no);
     const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
     if (j.is_discarded() || !j.is_object() || !j.contains("frame") || !j["frame"].is_number_integer() ||
-        !j.contains("props") || !j["props"].is_array())
-      throw Error("expected {\"frame\", \"props\": [{\"id\", \"T_world_prop\"}]}", c);
-    for (const auto& p : j["props"]) {
-      if (!p.is_object() || !p.contains("id") || !p["id"].is_number_integer() || !p.contains("T_world_prop"))
-        throw Error("expected props entries {\"id\", \"T_world_prop\"}", c);
-      try {
-        out[j["frame"].get<int>()][p["id"].get<int>()] = poseFromJson(p["T_world_prop"], "T_world_prop");
-      } catch (const Error& e) {
-        throw Error(e.message(), c);
-      }
+        !j.contains(key))
+      throw Error("expected " + expected, c);
+    try {
+      line_fn(j, c);
+    } catch (const Error& e) {
+      throw Error(e.message(), c);
     }
   }
-  return out;
 }
 
 std::vector<int> selectFrames(const std::vector<int>& all, const TrackRunOptions& o) {
@@ -130,24 +128,24 @@ std::vector<int> takeFrames(const fs::path& take, const std::vector<std::string>
 
 std::map<int, Pose> readPoseLines(const fs::path& path, const std::string& key) {
   std::map<int, Pose> out;
-  std::istringstream in(readTextFile(path));
-  int line_no = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++line_no;
-    if (line.empty()) continue;
-    ErrorContext c;
-    c.file = path.string();
-    c.field = "line " + std::to_string(line_no);
-    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
-    if (j.is_discarded() || !j.is_object() || !j.contains("frame") || !j["frame"].is_number_integer() ||
-        !j.contains(key))
-      throw Error("expected {\"frame\": integer, \"" + key + "\": {\"R\", \"t\"}}", c);
-    try {
-      out[j["frame"].get<int>()] = poseFromJson(j[key], key);
-    } catch (const Error& e) {
-      throw Error(e.message(), c);
+  forEachFrameLine(path, key, "{\"frame\": integer, \"" + key + "\": {\"R\", \"t\"}}",
+                   [&](const nlohmann::json& j, const ErrorContext&) {
+                     out[j["frame"].get<int>()] = poseFromJson(j[key], key);
+                   });
+  return out;
+}
+
+std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
+  std::map<int, std::map<int, Pose>> out;
+  const std::string expected = "{\"frame\", \"props\": [{\"id\", \"T_world_prop\"}]}";
+  forEachFrameLine(path, "props", expected, [&](const nlohmann::json& j, const ErrorContext& c) {
+    if (!j["props"].is_array()) throw Error("expected " + expected, c);
+    for (const auto& p : j["props"]) {
+      if (!p.is_object() || !p.contains("id") || !p["id"].is_number_integer() || !p.contains("T_world_prop"))
+        throw Error("expected props entries {\"id\", \"T_world_prop\"}", c);
+      out[j["frame"].get<int>()][p["id"].get<int>()] = poseFromJson(p["T_world_prop"], "T_world_prop");
     }
-  }
+  });
   return out;
 }
 

@@ -77,6 +77,9 @@ struct TrackRunSummary {
 std::vector<int> takeFrames(const std::filesystem::path& take, const std::vector<std::string>& cameras);
 // JSON lines {"frame", "T_world_cam"} -> frame -> pose; throws Error naming the file and line.
 std::map<int, Pose> readPoseLines(const std::filesystem::path& path, const std::string& key = "T_world_cam");
+// JSON lines {"frame", "props": [{"id", "T_world_prop"}]} (a synthetic take's truth/props.jsonl)
+// -> frame -> prop id -> pose; throws Error naming the file and line.
+std::map<int, std::map<int, Pose>> readPropTruth(const std::filesystem::path& path);
 
 TrackRunSummary runTrack(const TrackInput& input, const TrackRunOptions& options,
                          const std::function<void(int done, int total)>& progress = {});

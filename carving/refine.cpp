@@ -61,6 +61,7 @@ struct FreeSpace {
   double free_m = 0.03;
   int free_views = 1;
   double hidden_m = 0;  // 0 = off
+  double air_search_m = 1.0;  // how far an air entry may go looking for the first solid point
 };
 
 // The witnesses' hull depth only serves the loose visibility test (a candidate more than
@@ -272,6 +273,20 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
           break;
         }
       }
+      // Where the entry and the whole search range are air (a deep crease that witnesses see
+      // through), the first point no witness sees through lies farther on: march on to it.
+      if (entry_air && !found && first_solid == kInf && fs) {
+        const int air_steps = static_cast<int>(std::floor(fs->air_search_m / options.step_m));
+        for (int s = n_steps + 1; s <= air_steps; ++s) {
+          const double t = t0 + s * options.step_m;
+          const Eigen::Vector3d X = centre + t * d;
+          if (!carver.inside(hull, X)) continue;
+          if (cost(X, c) != kAir) {
+            first_solid = t;
+            break;
+          }
+        }
+      }
       // Space carving: what a witness looks through is air even where nothing deeper is
       // photo-consistent; the depth goes to the first point no witness sees through.
       if (entry_air && !found && first_solid < kInf) {
@@ -404,6 +419,8 @@ void PhotoHullOptions::validate() const {
     bad("witness_stride", "must be 1 to 8 (got " + std::to_string(witness_stride) + ")");
   if (!(hidden_m >= 0) || !std::isfinite(hidden_m))
     bad("hidden_m", "must be a finite value >= 0 (got " + num(hidden_m) + ")");
+  if (!(air_search_m >= refine.search_m) || !std::isfinite(air_search_m))
+    bad("air_search_m", "must be finite and >= refine.search_m (got " + num(air_search_m) + ")");
 }
 
 namespace {
@@ -464,7 +481,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   std::vector<const Witness*> main_refs;
   for (int i = 0; i < nw; ++i) main_refs.push_back(&views[i]);
   const float main_inv_gain = views[nw].inv_gain;
-  const FreeSpace fs{options.free_m, options.free_views, options.hidden_m};
+  const FreeSpace fs{options.free_m, options.free_views, options.hidden_m, options.air_search_m};
 
   cv::Mat out = hull_depth.clone();
   ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,

@@ -476,7 +476,8 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     const PhotoHullOptions& p = m.options.photo_hull;
     m.config["refine"]["photo_hull"] = {{"rounds", p.rounds}, {"free_m", p.free_m},
                                         {"free_views", p.free_views}, {"hidden_m", p.hidden_m},
-                                        {"witness_stride", p.witness_stride}};
+                                        {"witness_stride", p.witness_stride},
+                                        {"air_search_m", p.air_search_m}};
   }
 }
 

@@ -204,11 +204,16 @@ TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
 // red sleeve in front of the red shirt and the dark legs side by side are the same colour in
 // every witness, so much of the air in their creases is photo-consistent too and stays.
 // Measured at 10 cm in front, hull -> refineDepth -> photoHullDepth: t = 7 s 91.46 % -> 95.25 %
-// -> 95.38 %, t = 2.5 s 93.03 % -> 98.83 % -> 99.19 % (5 cm: 90.88 -> 91.16 %, 91.45 -> 94.51 %);
-// behind at 10 cm 99.76 % for both at t = 7 s, 99.78 / 99.77 % at t = 2.5 s. The photo hull carves only the air some witness's
-// own refinement looks through; with the witnesses' TRUE depths instead of their refined ones it
-// would reach 98.06 % at t = 7 s (measured): the rest of the crease air is seen through by no
-// witness. Asserted as regression bounds, with behind kept >= 99.5 %.
+// -> 95.40 %, t = 2.5 s 93.03 % -> 98.83 % -> 99.19 % (5 cm: 90.88 -> 91.16 %, 91.45 -> 94.51 %);
+// behind at 10 cm 99.76 % for both at t = 7 s, 99.78 / 99.77 % at t = 2.5 s. The photo hull
+// carves only the air some witness's own refinement looks through. With the witnesses' TRUE
+// depths in place of their refined ones (a diagnosis, measured once and not kept: free space
+// from the exact pixel's depth, free_m 8 mm, with the air search) it reaches 99.44 % at t = 7 s
+// and 99.72-99.93 % at t = 1, 2.5, 4, 8.5 s: the crease air is seen through by some witness, but
+// each witness's own depth holds its creases' air as the depth camera's does (at t = 7 s the
+// refined witness depths lie more than 5 cm in front on 4-12 % of their pixels, the hull's on
+// 9-20 %), and further rounds do not change them. Asserted as regression bounds, with behind
+// kept >= 99.5 %.
 TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
   struct Case {
     double time_s, front_10cm, photo_front_10cm;
@@ -231,7 +236,7 @@ TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
 }
 
 // Other frames, so that the photo hull is not tuned to the three above. Measured at 10 cm in
-// front (hull / refineDepth / photoHullDepth): t = 1 s 95.05 / 98.30 / 98.76 %, t = 5.5 s
+// front (hull / refineDepth / photoHullDepth): t = 1 s 95.05 / 98.30 / 98.98 %, t = 5.5 s
 // 100 / 100 / 100 %, t = 8.5 s 95.61 / 98.92 / 99.24 %; 10 cm behind 99.83 %, 99.60 %, 99.77 /
 // 99.78 %; 5 cm behind within 0.01 point of refineDepth's (99.56 / 99.58 %, 99.33 / 99.33 %,
 // 99.27 / 99.27 %).
@@ -239,7 +244,7 @@ TEST(RefineDepth, PhotoHullImprovesOtherFramesWithoutPushingBehind) {
   struct Case {
     double time_s, photo_front_10cm;
   };
-  for (const Case c : {Case{1.0, 0.985}, Case{5.5, 0.999}, Case{8.5, 0.99}}) {
+  for (const Case c : {Case{1.0, 0.989}, Case{5.5, 0.999}, Case{8.5, 0.99}}) {
     const PlateFrame f = makePlateFrame(c.time_s);
     const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
     const Result r = run(f, label.c_str(), true);
@@ -273,6 +278,9 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   EXPECT_THROW(p.validate(), Error);
   p = PhotoHullOptions{};
   p.witness_stride = 0;
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.air_search_m = 0.5 * p.refine.search_m;
   EXPECT_THROW(p.validate(), Error);
 
   const StudioFrame f = makeStudioFrame(4.0, 320, 180);

@@ -62,6 +62,8 @@ struct FreeSpace {
   int free_views = 1;
   double hidden_m = 0;  // 0 = off
   double air_search_m = 1.0;  // how far an air entry may go looking for the first solid point
+  double seen_veto = 0;       // > 0: a reference that sees the point by its refined depth ...
+  double seen_m = 0.02;       // ... (the point at most seen_m behind it) vetoes above this
 };
 
 // The witnesses' hull depth only serves the loose visibility test (a candidate more than
@@ -214,19 +216,24 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
       if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
       const float front = w.front.at<float>(iv, iu);
       if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
+      const float* seen_near = nullptr;  // the reference's refined depth, with seen_veto
       if (fs && !w.near_depth.empty()) {
         const int du = static_cast<int>(std::floor(px->x() + 0.5));
         const int dv = static_cast<int>(std::floor(px->y() + 0.5));
         if (du < 0 || dv < 0 || du >= w.near_depth.cols || dv >= w.near_depth.rows) continue;
-        const float near = w.near_depth.at<float>(dv, du), far = w.far_depth.at<float>(dv, du);
+        const float& near = w.near_depth.at<float>(dv, du);
+        const float far = w.far_depth.at<float>(dv, du);
         if (std::isfinite(near) && near > q.z() + fs->free_m && ++free >= fs->free_views)
           return static_cast<double>(kAir);
         if (fs->hidden_m > 0 && std::isfinite(far) && q.z() > far + fs->hidden_m) continue;
+        if (fs->seen_veto > 0 && std::isfinite(near)) seen_near = &near;
       }
       float cw[3];
       if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
       d[n] = colourDistance(c, cw);
       if (q.z() <= front + options.veto_m && d[n] > options.veto)
+        vetoed = std::max(vetoed, static_cast<double>(d[n]));
+      if (seen_near && d[n] > fs->seen_veto && q.z() <= *seen_near + fs->seen_m)
         vetoed = std::max(vetoed, static_cast<double>(d[n]));
       ++n;
     }
@@ -419,6 +426,10 @@ void PhotoHullOptions::validate() const {
     bad("witness_stride", "must be 1 to 8 (got " + std::to_string(witness_stride) + ")");
   if (!(hidden_m >= 0) || !std::isfinite(hidden_m))
     bad("hidden_m", "must be a finite value >= 0 (got " + num(hidden_m) + ")");
+  if (!(seen_veto >= 0) || !std::isfinite(seen_veto))
+    bad("seen_veto", "must be a finite value >= 0 (got " + num(seen_veto) + ")");
+  if (!(seen_m >= 0) || !std::isfinite(seen_m))
+    bad("seen_m", "must be a finite value >= 0 (got " + num(seen_m) + ")");
   if (!(air_search_m >= refine.search_m) || !std::isfinite(air_search_m))
     bad("air_search_m", "must be finite and >= refine.search_m (got " + num(air_search_m) + ")");
 }
@@ -481,7 +492,8 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   std::vector<const Witness*> main_refs;
   for (int i = 0; i < nw; ++i) main_refs.push_back(&views[i]);
   const float main_inv_gain = views[nw].inv_gain;
-  const FreeSpace fs{options.free_m, options.free_views, options.hidden_m, options.air_search_m};
+  const FreeSpace fs{options.free_m,       options.free_views, options.hidden_m,
+                     options.air_search_m, options.seen_veto,  options.seen_m};
 
   cv::Mat out = hull_depth.clone();
   ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,

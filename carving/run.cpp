@@ -477,7 +477,8 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     m.config["refine"]["photo_hull"] = {{"rounds", p.rounds}, {"free_m", p.free_m},
                                         {"free_views", p.free_views}, {"hidden_m", p.hidden_m},
                                         {"witness_stride", p.witness_stride},
-                                        {"air_search_m", p.air_search_m}};
+                                        {"air_search_m", p.air_search_m},
+                                        {"seen_veto", p.seen_veto}, {"seen_m", p.seen_m}};
   }
 }
 

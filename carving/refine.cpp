@@ -21,6 +21,7 @@ namespace previz::carving {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr float kInfF = std::numeric_limits<float>::infinity();
 
 std::string num(double v) {
   char buf[32];
@@ -58,7 +59,7 @@ struct Witness {
 
 // The photo-hull terms of the cost (photoHullDepth); absent for refineDepth.
 struct FreeSpace {
-  double free_m = 0.03;
+  double free_m = 0.01;
   int free_views = 1;
   double hidden_m = 0;  // 0 = off
   double air_search_m = 1.0;  // how far an air entry may go looking for the first solid point
@@ -216,24 +217,24 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
       if (iu < 0 || iv < 0 || iu >= w.front.cols || iv >= w.front.rows) continue;
       const float front = w.front.at<float>(iv, iu);
       if (!std::isfinite(front) || q.z() > front + options.visibility_m) continue;
-      const float* seen_near = nullptr;  // the reference's refined depth, with seen_veto
+      float seen_near = kInfF;  // the reference's refined depth, with seen_veto
       if (fs && !w.near_depth.empty()) {
         const int du = static_cast<int>(std::floor(px->x() + 0.5));
         const int dv = static_cast<int>(std::floor(px->y() + 0.5));
         if (du < 0 || dv < 0 || du >= w.near_depth.cols || dv >= w.near_depth.rows) continue;
-        const float& near = w.near_depth.at<float>(dv, du);
+        const float near = w.near_depth.at<float>(dv, du);
         const float far = w.far_depth.at<float>(dv, du);
         if (std::isfinite(near) && near > q.z() + fs->free_m && ++free >= fs->free_views)
           return static_cast<double>(kAir);
         if (fs->hidden_m > 0 && std::isfinite(far) && q.z() > far + fs->hidden_m) continue;
-        if (fs->seen_veto > 0 && std::isfinite(near)) seen_near = &near;
+        if (fs->seen_veto > 0) seen_near = near;
       }
       float cw[3];
       if (!sample(w.bgr, w.inv_gain, px->x(), px->y(), cw)) continue;
       d[n] = colourDistance(c, cw);
       if (q.z() <= front + options.veto_m && d[n] > options.veto)
         vetoed = std::max(vetoed, static_cast<double>(d[n]));
-      if (seen_near && d[n] > fs->seen_veto && q.z() <= *seen_near + fs->seen_m)
+      if (seen_near < kInfF && d[n] > fs->seen_veto && q.z() <= seen_near + fs->seen_m)
         vetoed = std::max(vetoed, static_cast<double>(d[n]));
       ++n;
     }

@@ -431,6 +431,12 @@ void PhotoHullOptions::validate() const {
     bad("seen_veto", "must be a finite value >= 0 (got " + num(seen_veto) + ")");
   if (!(seen_m >= 0) || !std::isfinite(seen_m))
     bad("seen_m", "must be a finite value >= 0 (got " + num(seen_m) + ")");
+  if (!(edge_jump_m >= 0) || !std::isfinite(edge_jump_m))
+    bad("edge_jump_m", "must be a finite value >= 0 (got " + num(edge_jump_m) + ")");
+  if (!(edge_alpha > 0) || !(edge_alpha <= 1))
+    bad("edge_alpha", "must be in (0, 1] (got " + num(edge_alpha) + ")");
+  if (!(edge_contrast > 0) || !std::isfinite(edge_contrast))
+    bad("edge_contrast", "must be a finite value > 0 (got " + num(edge_contrast) + ")");
   if (!(air_search_m >= refine.search_m) || !std::isfinite(air_search_m))
     bad("air_search_m", "must be finite and >= refine.search_m (got " + num(air_search_m) + ")");
 }
@@ -456,6 +462,73 @@ void spreadBlocks(cv::Mat& depth, const cv::Mat& mask, int stride) {
     for (int u = 0; u < depth.cols; ++u)
       if ((v % stride || u % stride) && m[u] > 127) row[u] = anchor[u - u % stride];
   }
+}
+
+// PhotoHullOptions::edge_jump_m: a pixel between a deeper neighbour and, opposite, one at its
+// own depth, whose colour holds less than edge_alpha of the near neighbour's, takes the deeper
+// neighbour's depth (refine.h). One pass over a copy, so that an edge moves by at most a pixel.
+long long settleOcclusionEdges(const Carver& carver, const VisualHull& hull,
+                               const RigCamera& camera, const cv::Mat& bgr, float inv_gain,
+                               cv::Mat& depth, const PhotoHullOptions& options, int threads) {
+  const Camera& cam = camera.camera;
+  const std::array<float, 256>& lin = srgbToLinear();
+  const Eigen::Matrix3d R = camera.T_world_cam.linear();
+  const Eigen::Vector3d centre = camera.T_world_cam.translation();
+  const double jump = options.edge_jump_m;
+  const cv::Mat src = depth.clone();
+  auto colour = [&](int u, int v, float* c) {
+    const std::uint8_t* p = bgr.ptr<std::uint8_t>(v) + 3 * u;
+    for (int k = 0; k < 3; ++k) c[k] = inv_gain * lin[p[k]];
+  };
+  constexpr int kDu[4] = {1, 0, 1, 1}, kDv[4] = {0, 1, 1, -1};
+  constexpr double kSnapM = 0.03;  // how far from the deeper neighbour's depth the hull is sought
+  long long moved = 0;
+#pragma omp parallel for schedule(dynamic, 8) num_threads(threads) reduction(+ : moved)
+  for (int v = 1; v < cam.height - 1; ++v) {
+    for (int u = 1; u < cam.width - 1; ++u) {
+      const float z = src.at<float>(v, u);
+      if (!std::isfinite(z)) continue;
+      double least_alpha = options.edge_alpha;
+      float deeper = 0;
+      for (int dir = 0; dir < 4; ++dir)
+        for (int sense = -1; sense <= 1; sense += 2) {
+          const int uf = u + sense * kDu[dir], vf = v + sense * kDv[dir];
+          const int un = u - sense * kDu[dir], vn = v - sense * kDv[dir];
+          const float zf = src.at<float>(vf, uf), zn = src.at<float>(vn, un);
+          if (!(std::isfinite(zf) && zf > z + jump)) continue;
+          if (!(std::isfinite(zn) && std::abs(zn - z) <= 0.5 * jump)) continue;
+          float cp[3], cf[3], cn[3];
+          colour(u, v, cp);
+          colour(uf, vf, cf);
+          colour(un, vn, cn);
+          if (colourDistance(cn, cf) < options.edge_contrast) continue;
+          double dd = 0, dp = 0;
+          for (int k = 0; k < 3; ++k) {
+            dd += (cn[k] - cf[k]) * (cn[k] - cf[k]);
+            dp += (cp[k] - cf[k]) * (cn[k] - cf[k]);
+          }
+          const double alpha = dp / dd;  // the near colour's share of the pixel's
+          if (alpha < least_alpha) {
+            least_alpha = alpha;
+            deeper = zf;
+          }
+        }
+      if (deeper == 0) continue;
+      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+      if (!ray) continue;
+      const Eigen::Vector3d d = R * (*ray / ray->z());
+      bool found = false;
+      for (double dt = 0; dt <= kSnapM + 1e-9 && !found; dt += options.refine.step_m)
+        for (const double t : {deeper - dt, deeper + dt})
+          if (t > z && carver.inside(hull, centre + t * d)) {
+            depth.at<float>(v, u) = static_cast<float>(t);
+            found = true;
+            break;
+          }
+      moved += found;
+    }
+  }
+  return moved;
 }
 
 }  // namespace
@@ -527,6 +600,9 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
     n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs, options.refine,
                    &fs, threads);
   }
+  if (options.edge_jump_m > 0)
+    local.edge_moved = settleOcclusionEdges(carver, hull, camera, plate.bgr, main_inv_gain, out,
+                                            options, threads);
   local.depth.pixels = n.pixels;
   local.depth.inconsistent = n.inconsistent;
   local.depth.moved = n.moved;

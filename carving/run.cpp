@@ -478,7 +478,10 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
                                         {"free_views", p.free_views}, {"hidden_m", p.hidden_m},
                                         {"witness_stride", p.witness_stride},
                                         {"air_search_m", p.air_search_m},
-                                        {"seen_veto", p.seen_veto}, {"seen_m", p.seen_m}};
+                                        {"seen_veto", p.seen_veto}, {"seen_m", p.seen_m},
+                                        {"edge_jump_m", p.edge_jump_m},
+                                        {"edge_alpha", p.edge_alpha},
+                                        {"edge_contrast", p.edge_contrast}};
   }
 }
 

@@ -221,8 +221,8 @@ TEST(BatchCollect, DepthExrSequencePerCameraIsCarvesDepthAndLiesOnTheActor) {
 // finite exactly where it is. How well it orders the actor is carving's to show, at the sizes it
 // is made for (tests/carving/refine_test.cpp: 1280x720 witnesses); on this 320x180 take, where a
 // witness pixel is 2 cm wide, it is printed only. Measured over the 4 frames: more than 5 cm in
-// front of the true surface 26.5-27.8 % of the actor's pixels with the hull depth, 14.0-17.0 %
-// refined; more than 5 cm behind 0.1-0.2 % and 6.0-9.3 %: at this size the refinement pushes
+// front of the true surface 26.5-27.8 % of the actor's pixels with the hull depth, 13.1-16.0 %
+// refined; more than 5 cm behind 0.1-0.2 % and 6.0-9.7 %: at this size the refinement pushes
 // depth behind the surface.
 TEST(BatchCollect, RefinedDepthSequenceIsCarvesAndNeverNearerThanTheHull) {
   const test::BatchFixture& f = test::batchFixture();

@@ -77,9 +77,10 @@ struct Ordering {
 constexpr double kPlanes[3] = {0.05, 0.10, 0.20};
 // How much "behind" the photo hull may give up against refineDepth at 5, 10 and 20 cm: its veto
 // from the witnesses' refined depths (PhotoHullOptions::seen_veto) wrongly rules out some true
-// surface points where a witness's own depth is too deep (measured at most 0.39, 0.13 and 0.03
-// point on the six frames), for +0.3 to +6 points in front at 5 cm.
-constexpr double kBehindSlack[3] = {0.005, 0.0015, 0.0005};
+// surface points where a witness's own depth is too deep, and a few near pixels at occlusion
+// edges are read as the deeper side (edge_jump_m). Measured at most 0.52, 0.16 and 0.06 point on
+// the six frames, for +0.1 to +6 points in front at 5 cm.
+constexpr double kBehindSlack[3] = {0.006, 0.002, 0.001};
 
 Ordering ordering(const cv::Mat& depth, const cv::Mat& truth) {
   Ordering o;
@@ -133,9 +134,10 @@ Result run(const PlateFrame& f, const char* label, bool photo_hull = false) {
                            f.studio.masks, PhotoHullOptions{}, &r.photo_stats);
     r.photo = ordering(photo, truth);
     std::printf("  photo hull: %lld pixels with free space at the hull entry, %lld moved deeper, "
-                "%.0f ms per frame (CPU, %.0f ms of it refining the witnesses)\n",
-                r.photo_stats.free_space, r.photo_stats.depth.moved, r.photo_stats.ms,
-                r.photo_stats.witness_ms);
+                "%lld moved across an occlusion edge, %.0f ms per frame (CPU, %.0f ms of it "
+                "refining the witnesses)\n",
+                r.photo_stats.free_space, r.photo_stats.depth.moved, r.photo_stats.edge_moved,
+                r.photo_stats.ms, r.photo_stats.witness_ms);
   }
   for (int i = 0; i < 3; ++i) {
     std::printf("  plane %2.0f cm in front: hull %.3f %%, refined %.3f %%", 100 * kPlanes[i],
@@ -159,13 +161,14 @@ Result run(const PlateFrame& f, const char* label, bool photo_hull = false) {
 // t = 4 s, the frame of item 1 (walking along the back of the stage, seen from the side): the
 // hull puts 1.6 % of the actor pixels more than 10 cm in front (the creases between arms and
 // torso and at the hips, that every silhouette contains). Photo-consistency takes the goal:
-// measured 99.68 % in front, 99.83 % behind at 10 cm; the photo hull 99.71 % / 99.89 % (5 cm in
-// front: 96.40 % -> 97.95 %).
+// measured 99.68 % in front, 99.83 % behind at 10 cm; the photo hull 99.78 % / 99.88 % (5 cm in
+// front: 96.40 % -> 98.04 %).
 TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
   const PlateFrame f = makePlateFrame(4.0);
   const Result r = run(f, "t = 4 s", true);
   EXPECT_GE(r.photo.front[1], 0.995);
   EXPECT_GE(r.photo.behind[1], 0.995);
+  EXPECT_GT(r.photo_stats.edge_moved, 0);
   EXPECT_GE(r.photo.front[2], 0.999);
   EXPECT_GE(r.photo.behind[2], 0.999);
   EXPECT_GE(r.photo.front[0], r.refined.front[0] + 0.005);
@@ -209,8 +212,8 @@ TEST(RefineDepth, OrdersActorWithinTenCentimetresBeyondTheHull) {
 // red sleeve in front of the red shirt and the dark legs side by side are the same colour in
 // every witness, so much of the air in their creases is photo-consistent too and stays.
 // Measured at 10 cm in front, hull -> refineDepth -> photoHullDepth: t = 7 s 91.46 % -> 95.25 %
-// -> 95.62 %, t = 2.5 s 93.03 % -> 98.83 % -> 99.55 % (5 cm: 90.88 -> 92.04 %, 91.45 -> 97.78 %);
-// behind at 10 cm 99.76 / 99.73 % at t = 7 s, 99.78 / 99.66 % at t = 2.5 s. The photo hull
+// -> 95.87 %, t = 2.5 s 93.03 % -> 98.83 % -> 99.60 % (5 cm: 90.88 -> 92.50 %, 91.45 -> 97.87 %);
+// behind at 10 cm 99.76 / 99.73 % at t = 7 s, 99.78 / 99.62 % at t = 2.5 s. The photo hull
 // carves only the air some witness's own refinement looks through. With the witnesses' TRUE
 // depths in place of their refined ones (a diagnosis, measured once and not kept: free space
 // from the exact pixel's depth, free_m 8 mm, with the air search) it reaches 99.44 % at t = 7 s
@@ -223,7 +226,7 @@ TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
   struct Case {
     double time_s, front_10cm, photo_front_10cm;
   };
-  for (const Case c : {Case{7.0, 0.95, 0.956}, Case{2.5, 0.985, 0.995}}) {
+  for (const Case c : {Case{7.0, 0.95, 0.958}, Case{2.5, 0.985, 0.995}}) {
     const PlateFrame f = makePlateFrame(c.time_s);
     const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
     const Result r = run(f, label.c_str(), true);
@@ -242,15 +245,15 @@ TEST(RefineDepth, ImprovesTheHardestFramesWithoutPushingBehind) {
 }
 
 // Other frames, so that the photo hull is not tuned to the three above. Measured at 10 cm in
-// front (hull / refineDepth / photoHullDepth): t = 1 s 95.05 / 98.30 / 99.30 %, t = 5.5 s
-// 100 / 100 / 100 %, t = 8.5 s 95.61 / 98.92 / 99.41 %; 10 cm behind (refineDepth / photo hull)
-// 99.83 / 99.78 %, 99.60 / 99.57 %, 99.77 / 99.82 %; 5 cm behind 99.56 / 99.46 %, 99.33 /
-// 99.14 %, 99.27 / 99.10 %.
+// front (hull / refineDepth / photoHullDepth): t = 1 s 95.05 / 98.30 / 99.52 %, t = 5.5 s
+// 100 / 100 / 100 %, t = 8.5 s 95.61 / 98.92 / 99.59 %; 10 cm behind (refineDepth / photo hull)
+// 99.83 / 99.78 %, 99.60 / 99.52 %, 99.77 / 99.81 %; 5 cm behind 99.56 / 99.43 %, 99.33 /
+// 99.04 %, 99.27 / 99.03 %. Item 2's 99.5 % at 10 cm is asserted on both sides.
 TEST(RefineDepth, PhotoHullImprovesOtherFramesWithoutPushingBehind) {
   struct Case {
     double time_s, photo_front_10cm;
   };
-  for (const Case c : {Case{1.0, 0.9925}, Case{5.5, 0.999}, Case{8.5, 0.9935}}) {
+  for (const Case c : {Case{1.0, 0.995}, Case{5.5, 0.999}, Case{8.5, 0.995}}) {
     const PlateFrame f = makePlateFrame(c.time_s);
     const std::string label = "t = " + std::to_string(c.time_s).substr(0, 3) + " s";
     const Result r = run(f, label.c_str(), true);
@@ -261,6 +264,47 @@ TEST(RefineDepth, PhotoHullImprovesOtherFramesWithoutPushingBehind) {
     }
     EXPECT_GE(r.photo.behind[1], 0.995) << label;
   }
+}
+
+// The occlusion-edge step alone (PhotoHullOptions::edge_jump_m), at t = 8.5 s, where most of the
+// photo hull's misses at 10 cm in front lie on a 1 px band beside the forearm and the hand (the
+// hull widens them; the plate there blends skin with the trousers behind). Measured: 56 pixels
+// moved, 10 cm in front 99.41 -> 99.59 %, behind 99.82 -> 99.81 %.
+TEST(RefineDepth, OcclusionEdgesGiveTheBlendedPixelsToTheDeeperSurface) {
+  const PlateFrame f = makePlateFrame(8.5);
+  HullOptions o;
+  o.voxel_m = 0.005;
+  Carver carver(f.studio.witnesses, o);
+  Silhouettes s;
+  s.masks = f.studio.masks;
+  const VisualHull hull = carver.carve(s);
+  const cv::Mat hull_depth = carver.depth(hull, f.studio.main, f.studio.main_raster.mask);
+  PhotoHullOptions off;
+  off.edge_jump_m = 0;
+  PhotoHullStats with_stats, without_stats;
+  const cv::Mat with = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
+                                      f.witness_plates, f.studio.masks, {}, &with_stats);
+  const cv::Mat without = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
+                                         f.witness_plates, f.studio.masks, off, &without_stats);
+  const cv::Mat& truth = f.studio.main_raster.depth;
+  const Ordering w = ordering(with, truth), n = ordering(without, truth);
+  std::printf("  edges: %lld pixels moved; 10 cm in front %.3f -> %.3f %%, behind %.3f -> %.3f %%\n",
+              with_stats.edge_moved, 100 * n.front[1], 100 * w.front[1], 100 * n.behind[1],
+              100 * w.behind[1]);
+  EXPECT_EQ(without_stats.edge_moved, 0);
+  EXPECT_GT(with_stats.edge_moved, 20);
+  int changed = 0, nearer = 0;
+  for (int v = 0; v < with.rows; ++v)
+    for (int u = 0; u < with.cols; ++u) {
+      const float a = with.at<float>(v, u), b = without.at<float>(v, u);
+      if (!std::isfinite(b)) continue;
+      changed += a != b;
+      nearer += a < b;
+    }
+  EXPECT_EQ(changed, with_stats.edge_moved);  // only the edge pixels differ ...
+  EXPECT_EQ(nearer, 0);                       // ... and only deeper
+  EXPECT_GE(w.front[1], n.front[1] + 0.001);
+  EXPECT_GE(w.behind[1], n.behind[1] - 0.0005);
 }
 
 TEST(RefineDepth, RejectsBadOptionsAndInputs) {
@@ -293,6 +337,15 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   EXPECT_THROW(p.validate(), Error);
   p = PhotoHullOptions{};
   p.seen_m = std::nan("");
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.edge_jump_m = -0.05;
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.edge_alpha = 0;
+  EXPECT_THROW(p.validate(), Error);
+  p = PhotoHullOptions{};
+  p.edge_contrast = 0;
   EXPECT_THROW(p.validate(), Error);
 
   const StudioFrame f = makeStudioFrame(4.0, 320, 180);
@@ -345,8 +398,8 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
 // What `previz carve --refine` does on a take without mattes: every silhouette keyed from its
 // plate (carving/keyer.h, no clean plate), the main camera's too. The keyed main silhouette
 // misses some actor pixels (their depth is +inf: "behind" fails there for the hull as well).
-// Measured at t = 4 s (hull / photoHullDepth): 10 cm in front 98.38 / 99.74 %, 10 cm behind
-// 99.27 / 99.16 %: as with the true masks. (Before the air search and seen_veto, the keyed
+// Measured at t = 4 s (hull / photoHullDepth): 10 cm in front 98.38 / 99.78 %, 10 cm behind
+// 99.27 / 99.15 %: as with the true masks. (Before the air search and seen_veto, the keyed
 // t = 7 s and t = 2.5 s frames, with witness_stride 1, gave 91.58 / 95.41 % and 92.90 / 99.21 %
 // in front, 99.26 / 99.15 % behind: also as with the true masks.)
 TEST(RefineDepth, KeyedSilhouettesOrderTheActorAsTheTrueMasksDo) {

@@ -297,8 +297,10 @@ void BM_PhotoHull(benchmark::State& state) {
                                in.plates, in.f.truth_masks, o, &stats);
     char extra[160];
     std::snprintf(extra, sizeof extra,
-                  "\"voxel_m\":%.3f,\"pixels\":%lld,\"moved\":%lld,\"free_space\":%lld,\"witness_ms\":%.1f",
-                  voxel, stats.depth.pixels, stats.depth.moved, stats.free_space, stats.witness_ms);
+                  "\"voxel_m\":%.3f,\"pixels\":%lld,\"moved\":%lld,\"free_space\":%lld,"
+                  "\"edge_moved\":%lld,\"witness_ms\":%.1f",
+                  voxel, stats.depth.pixels, stats.depth.moved, stats.free_space, stats.edge_moved,
+                  stats.witness_ms);
     record("4s_photo_hull_" + voxelLabel(voxel) + threadKey(threads), "main_depth_photo_hull",
            "1920x1080+8x1280x720@" + voxelLabel(voxel), sw, -1, threads, extra);
     benchmark::DoNotOptimize(d.data);

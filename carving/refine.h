@@ -101,7 +101,7 @@ struct PhotoHullOptions {
   RefineOptions refine;  // every view's refinement (the depth camera's and the witnesses')
   // Rounds of (witnesses refined, then the depth camera with their free space) after the depth
   // camera's first pass; each round's witnesses see the depth camera's last depth. 0 = the
-  // result of refineDepth.
+  // result of refineDepth (with edge_jump_m > 0, followed by the occlusion-edge step).
   int rounds = 1;
   // A witness sees through a point its refined depth (the nearest over the 3x3 pixels around
   // the point's projection) lies this far behind. 3 -> 1 cm measured: +0.02 to +0.17 point at

@@ -110,16 +110,34 @@ void expectBeyondHull(const cv::Mat& hull_depth, const cv::Mat& depth, const cha
   EXPECT_EQ(finite_mismatch, 0) << what;
 }
 
+// The frame carved at 5 mm from the true masks, and the main camera's hull depth.
+struct CarvedFrame {
+  static HullOptions fine() {
+    HullOptions o;
+    o.voxel_m = 0.005;
+    return o;
+  }
+  static Silhouettes masks(const PlateFrame& f) {
+    Silhouettes s;
+    s.masks = f.studio.masks;
+    return s;
+  }
+  explicit CarvedFrame(const PlateFrame& f)
+      : carver(f.studio.witnesses, fine()),
+        hull(carver.carve(masks(f))),
+        hull_depth(carver.depth(hull, f.studio.main, f.studio.main_raster.mask)) {}
+  Carver carver;
+  VisualHull hull;
+  cv::Mat hull_depth;
+};
+
 // Carves the frame, takes the hull depth and refines it (and with photo_hull also by the photo
 // hull); prints item 2 for each.
 Result run(const PlateFrame& f, const char* label, bool photo_hull = false) {
-  HullOptions o;
-  o.voxel_m = 0.005;
-  Carver carver(f.studio.witnesses, o);
-  Silhouettes s;
-  s.masks = f.studio.masks;
-  const VisualHull hull = carver.carve(s);
-  const cv::Mat hull_depth = carver.depth(hull, f.studio.main, f.studio.main_raster.mask);
+  const CarvedFrame c(f);
+  const Carver& carver = c.carver;
+  const VisualHull& hull = c.hull;
+  const cv::Mat& hull_depth = c.hull_depth;
   Result r;
   const cv::Mat refined = refineDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
                                       f.witness_plates, f.studio.masks, RefineOptions{}, &r.stats);
@@ -272,20 +290,15 @@ TEST(RefineDepth, PhotoHullImprovesOtherFramesWithoutPushingBehind) {
 // moved, 10 cm in front 99.41 -> 99.59 %, behind 99.82 -> 99.81 %.
 TEST(RefineDepth, OcclusionEdgesGiveTheBlendedPixelsToTheDeeperSurface) {
   const PlateFrame f = makePlateFrame(8.5);
-  HullOptions o;
-  o.voxel_m = 0.005;
-  Carver carver(f.studio.witnesses, o);
-  Silhouettes s;
-  s.masks = f.studio.masks;
-  const VisualHull hull = carver.carve(s);
-  const cv::Mat hull_depth = carver.depth(hull, f.studio.main, f.studio.main_raster.mask);
+  const CarvedFrame c(f);
   PhotoHullOptions off;
   off.edge_jump_m = 0;
   PhotoHullStats with_stats, without_stats;
-  const cv::Mat with = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
+  const cv::Mat with = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate, c.hull_depth,
                                       f.witness_plates, f.studio.masks, {}, &with_stats);
-  const cv::Mat without = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
-                                         f.witness_plates, f.studio.masks, off, &without_stats);
+  const cv::Mat without = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate,
+                                         c.hull_depth, f.witness_plates, f.studio.masks, off,
+                                         &without_stats);
   const cv::Mat& truth = f.studio.main_raster.depth;
   const Ordering w = ordering(with, truth), n = ordering(without, truth);
   std::printf("  edges: %lld pixels moved; 10 cm in front %.3f -> %.3f %%, behind %.3f -> %.3f %%\n",
@@ -320,14 +333,9 @@ TEST(RefineDepth, PhotoHullOnFramesItWasNotTunedOn) {
   int met = 0;
   for (const double t : {0.5, 1.5, 2.0, 3.0, 3.5, 4.5, 5.0, 6.0, 6.5, 7.5, 8.0, 9.0, 9.5}) {
     const PlateFrame f = makePlateFrame(t);
-    HullOptions o;
-    o.voxel_m = 0.005;
-    Carver carver(f.studio.witnesses, o);
-    Silhouettes s;
-    s.masks = f.studio.masks;
-    const VisualHull hull = carver.carve(s);
-    const cv::Mat hull_depth = carver.depth(hull, f.studio.main, f.studio.main_raster.mask);
-    const cv::Mat photo = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth,
+    const CarvedFrame c(f);
+    const cv::Mat& hull_depth = c.hull_depth;
+    const cv::Mat photo = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate, hull_depth,
                                          f.witness_plates, f.studio.masks);
     const cv::Mat& truth = f.studio.main_raster.depth;
     const double hull_front = orderedFraction(hull_depth, truth, 0.10, true);

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -55,16 +56,6 @@ struct Witness {
   // photoHullDepth: the view's own refined depth (full size), min and max over each pixel's
   // 3x3 neighbourhood (the projection of a point is not the pixel centre); empty = none yet.
   cv::Mat near_depth, far_depth;
-};
-
-// The photo-hull terms of the cost (photoHullDepth); absent for refineDepth.
-struct FreeSpace {
-  double free_m = 0.01;
-  int free_views = 1;
-  double hidden_m = 0;  // 0 = off
-  double air_search_m = 1.0;  // how far an air entry may go looking for the first solid point
-  double seen_veto = 0;       // > 0: a reference that sees the point by its refined depth ...
-  double seen_m = 0.02;       // ... (the point at most seen_m behind it) vetoes above this
 };
 
 // The witnesses' hull depth only serves the loose visibility test (a candidate more than
@@ -115,6 +106,21 @@ bool sample(const cv::Mat& bgr, float inv_gain, double u, double v, float* c) {
   return true;
 }
 
+// Linear colour of the plate's pixel (u, v), divided by the camera's gain.
+void pixelColour(const cv::Mat& bgr, float inv_gain, int u, int v, float* c) {
+  const std::array<float, 256>& lin = srgbToLinear();
+  const std::uint8_t* p = bgr.ptr<std::uint8_t>(v) + 3 * u;
+  for (int ch = 0; ch < 3; ++ch) c[ch] = inv_gain * lin[p[ch]];
+}
+
+// World direction of pixel (u, v)'s ray, scaled to unit depth along the camera axis (a point at
+// depth t is centre + t * direction); nullopt where the lens has no ray.
+std::optional<Eigen::Vector3d> rayDirection(const RigCamera& camera, int u, int v) {
+  const auto ray = camera.camera.unproject(Eigen::Vector2d(u, v));
+  if (!ray) return std::nullopt;
+  return Eigen::Vector3d(camera.T_world_cam.linear() * (*ray / ray->z()));
+}
+
 // Relative colour distance: L1 difference over the pair's mean brightness (floored, so that the
 // noise of near-black pixels does not read as disagreement).
 float colourDistance(const float* a, const float* b) {
@@ -135,7 +141,6 @@ void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain
                    const cv::Mat& hull_depth, std::vector<Witness>& witnesses) {
   const std::array<float, 256>& lin = srgbToLinear();
   const Camera& cam = camera.camera;
-  const Eigen::Matrix3d R = camera.T_world_cam.linear();
   const Eigen::Vector3d centre = camera.T_world_cam.translation();
   for (Witness& w : witnesses) {
     if (w.gain > 0) {
@@ -150,9 +155,9 @@ void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain
         const std::uint8_t* m = bgr.ptr<std::uint8_t>(v) + 3 * u;
         const float main_level = lin[m[0]] + lin[m[1]] + lin[m[2]];
         if (main_level < 0.03f) continue;  // too dark to measure a ratio
-        const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+        const auto ray = rayDirection(camera, u, v);
         if (!ray) continue;
-        const Eigen::Vector3d X = centre + t * (R * (*ray / ray->z()));
+        const Eigen::Vector3d X = centre + t * *ray;
         const Eigen::Vector3d q = w.T_cam_world * X;
         const auto px = w.rc->camera.project(q);
         if (!px) continue;
@@ -181,7 +186,8 @@ struct ViewCounts {
 };
 
 // Refines 'depth' in place: the hull depth of 'camera' (full size, plate 'bgr' divided by its
-// gain) against the reference views. With 'fs' (photoHullDepth) the references' own refined
+// gain) against the reference views. With 'fs' (photoHullDepth's options: its free-space, veto
+// and air-search terms; options.refine is not read from it) the references' own refined
 // depths also decide free space (a point well in front of the refined surface of
 // fs->free_views references is air: they see through it; where the hull entry is air and nothing
 // deeper agrees, the first point no reference sees through) and, with hidden_m > 0, visibility
@@ -189,12 +195,12 @@ struct ViewCounts {
 ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCamera& camera,
                       const cv::Mat& bgr_plate, float inv_gain, cv::Mat& depth,
                       const std::vector<const Witness*>& refs, const RefineOptions& options,
-                      const FreeSpace* fs, int threads) {
+                      const PhotoHullOptions* fs, int threads) {
   const Camera& cam = camera.camera;
-  const std::array<float, 256>& lin = srgbToLinear();
-  const Eigen::Matrix3d R = camera.T_world_cam.linear();
   const Eigen::Vector3d centre = camera.T_world_cam.translation();
   const int n_steps = static_cast<int>(std::floor(options.search_m / options.step_m));
+  const int air_steps =
+      fs ? static_cast<int>(std::floor(fs->air_search_m / options.step_m)) : n_steps;
   const int nw = static_cast<int>(refs.size());
   constexpr float kAir = -1.0f;  // cost() result: free space
   long long pixels = 0, inconsistent = 0, moved = 0, free_space = 0;
@@ -248,16 +254,15 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
 #pragma omp parallel for schedule(dynamic, 4) num_threads(threads) reduction(+ : pixels, inconsistent, moved, free_space)
   for (int v = 0; v < cam.height; ++v) {
     float* row = depth.ptr<float>(v);
-    const std::uint8_t* bgr = bgr_plate.ptr<std::uint8_t>(v);
     for (int u = 0; u < cam.width; ++u) {
       const double t0 = row[u];
       if (!std::isfinite(t0)) continue;
       ++pixels;
-      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+      const auto ray = rayDirection(camera, u, v);
       if (!ray) continue;
-      const Eigen::Vector3d d = R * (*ray / ray->z());
-      const float c[3] = {inv_gain * lin[bgr[3 * u]], inv_gain * lin[bgr[3 * u + 1]],
-                          inv_gain * lin[bgr[3 * u + 2]]};
+      const Eigen::Vector3d& d = *ray;
+      float c[3];
+      pixelColour(bgr_plate, inv_gain, u, v, c);
       double cost0 = cost(centre + t0 * d, c);
       if (cost0 <= options.agree && cost0 != kAir) continue;
       ++inconsistent;
@@ -268,31 +273,21 @@ ViewCounts refineView(const Carver& carver, const VisualHull& hull, const RigCam
       }
       double first_solid = kInf;
       bool found = false;
-      for (int s = 1; s <= n_steps; ++s) {
+      // Where the entry and the whole search range are air (a deep crease that witnesses see
+      // through), the first point no witness sees through lies farther on: an air entry marches
+      // on past search_m (to air_steps) looking for that point only.
+      for (int s = 1; s <= (entry_air ? air_steps : n_steps); ++s) {
+        if (s > n_steps && first_solid < kInf) break;
         const double t = t0 + s * options.step_m;
         const Eigen::Vector3d X = centre + t * d;
         if (!carver.inside(hull, X)) continue;
         const double k = cost(X, c);
         if (k != kAir && first_solid == kInf) first_solid = t;
-        if (k != kAir && k <= options.agree && k <= options.margin * cost0) {
+        if (s <= n_steps && k != kAir && k <= options.agree && k <= options.margin * cost0) {
           row[u] = static_cast<float>(t);
           ++moved;
           found = true;
           break;
-        }
-      }
-      // Where the entry and the whole search range are air (a deep crease that witnesses see
-      // through), the first point no witness sees through lies farther on: march on to it.
-      if (entry_air && !found && first_solid == kInf && fs) {
-        const int air_steps = static_cast<int>(std::floor(fs->air_search_m / options.step_m));
-        for (int s = n_steps + 1; s <= air_steps; ++s) {
-          const double t = t0 + s * options.step_m;
-          const Eigen::Vector3d X = centre + t * d;
-          if (!carver.inside(hull, X)) continue;
-          if (cost(X, c) != kAir) {
-            first_solid = t;
-            break;
-          }
         }
       }
       // Space carving: what a witness looks through is air even where nothing deeper is
@@ -471,15 +466,9 @@ long long settleOcclusionEdges(const Carver& carver, const VisualHull& hull,
                                const RigCamera& camera, const cv::Mat& bgr, float inv_gain,
                                cv::Mat& depth, const PhotoHullOptions& options, int threads) {
   const Camera& cam = camera.camera;
-  const std::array<float, 256>& lin = srgbToLinear();
-  const Eigen::Matrix3d R = camera.T_world_cam.linear();
   const Eigen::Vector3d centre = camera.T_world_cam.translation();
   const double jump = options.edge_jump_m;
   const cv::Mat src = depth.clone();
-  auto colour = [&](int u, int v, float* c) {
-    const std::uint8_t* p = bgr.ptr<std::uint8_t>(v) + 3 * u;
-    for (int k = 0; k < 3; ++k) c[k] = inv_gain * lin[p[k]];
-  };
   constexpr int kDu[4] = {1, 0, 1, 1}, kDv[4] = {0, 1, 1, -1};
   constexpr double kSnapM = 0.03;  // how far from the deeper neighbour's depth the hull is sought
   long long moved = 0;
@@ -490,6 +479,8 @@ long long settleOcclusionEdges(const Carver& carver, const VisualHull& hull,
       if (!std::isfinite(z)) continue;
       double least_alpha = options.edge_alpha;
       float deeper = 0;
+      float cp[3];
+      pixelColour(bgr, inv_gain, u, v, cp);
       for (int dir = 0; dir < 4; ++dir)
         for (int sense = -1; sense <= 1; sense += 2) {
           const int uf = u + sense * kDu[dir], vf = v + sense * kDv[dir];
@@ -497,10 +488,9 @@ long long settleOcclusionEdges(const Carver& carver, const VisualHull& hull,
           const float zf = src.at<float>(vf, uf), zn = src.at<float>(vn, un);
           if (!(std::isfinite(zf) && zf > z + jump)) continue;
           if (!(std::isfinite(zn) && std::abs(zn - z) <= 0.5 * jump)) continue;
-          float cp[3], cf[3], cn[3];
-          colour(u, v, cp);
-          colour(uf, vf, cf);
-          colour(un, vn, cn);
+          float cf[3], cn[3];
+          pixelColour(bgr, inv_gain, uf, vf, cf);
+          pixelColour(bgr, inv_gain, un, vn, cn);
           if (colourDistance(cn, cf) < options.edge_contrast) continue;
           double dd = 0, dp = 0;
           for (int k = 0; k < 3; ++k) {
@@ -514,9 +504,9 @@ long long settleOcclusionEdges(const Carver& carver, const VisualHull& hull,
           }
         }
       if (deeper == 0) continue;
-      const auto ray = cam.unproject(Eigen::Vector2d(u, v));
+      const auto ray = rayDirection(camera, u, v);
       if (!ray) continue;
-      const Eigen::Vector3d d = R * (*ray / ray->z());
+      const Eigen::Vector3d& d = *ray;
       bool found = false;
       for (double dt = 0; dt <= kSnapM + 1e-9 && !found; dt += options.refine.step_m)
         for (const double t : {deeper - dt, deeper + dt})
@@ -566,8 +556,6 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   std::vector<const Witness*> main_refs;
   for (int i = 0; i < nw; ++i) main_refs.push_back(&views[i]);
   const float main_inv_gain = views[nw].inv_gain;
-  const FreeSpace fs{options.free_m,       options.free_views, options.hidden_m,
-                     options.air_search_m, options.seen_veto,  options.seen_m};
 
   cv::Mat out = hull_depth.clone();
   ViewCounts n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs,
@@ -589,7 +577,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
         if (j != i) refs.push_back(&views[j]);
       refined[i] = witness_hull[i].clone();
       const ViewCounts c = refineView(carver, hull, rc, views[i].bgr, views[i].inv_gain,
-                                      refined[i], refs, options.refine, &fs, threads);
+                                      refined[i], refs, options.refine, &options, threads);
       spreadBlocks(refined[i], witness_masks[index[i]], stride);
       local.witness_pixels[i] = c.pixels;
       local.witness_moved[i] = c.moved;
@@ -598,7 +586,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
     local.witness_ms += msSince(witness_start);
     out = hull_depth.clone();
     n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs, options.refine,
-                   &fs, threads);
+                   &options, threads);
   }
   if (options.edge_jump_m > 0)
     local.edge_moved = settleOcclusionEdges(carver, hull, camera, plate.bgr, main_inv_gain, out,

@@ -29,6 +29,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <utility>
+#include <vector>
 
 #include "carving/keyer.h"
 #include "carving/refine.h"
@@ -361,36 +363,24 @@ TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   o = RefineOptions{};
   o.best_of = 0;
   EXPECT_THROW(o.validate(), Error);
-  PhotoHullOptions p;
-  p.free_views = 0;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.refine.step_m = -1;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.free_m = 0;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.witness_stride = 0;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.air_search_m = 0.5 * p.refine.search_m;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.seen_veto = -0.1;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.seen_m = std::nan("");
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.edge_jump_m = -0.05;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.edge_alpha = 0;
-  EXPECT_THROW(p.validate(), Error);
-  p = PhotoHullOptions{};
-  p.edge_contrast = 0;
-  EXPECT_THROW(p.validate(), Error);
+  // Each photo-hull option out of its range, one at a time.
+  const std::vector<std::pair<const char*, void (*)(PhotoHullOptions&)>> bad_photo = {
+      {"free_views", [](PhotoHullOptions& p) { p.free_views = 0; }},
+      {"refine.step_m", [](PhotoHullOptions& p) { p.refine.step_m = -1; }},
+      {"free_m", [](PhotoHullOptions& p) { p.free_m = 0; }},
+      {"witness_stride", [](PhotoHullOptions& p) { p.witness_stride = 0; }},
+      {"air_search_m", [](PhotoHullOptions& p) { p.air_search_m = 0.5 * p.refine.search_m; }},
+      {"seen_veto", [](PhotoHullOptions& p) { p.seen_veto = -0.1; }},
+      {"seen_m", [](PhotoHullOptions& p) { p.seen_m = std::nan(""); }},
+      {"edge_jump_m", [](PhotoHullOptions& p) { p.edge_jump_m = -0.05; }},
+      {"edge_alpha", [](PhotoHullOptions& p) { p.edge_alpha = 0; }},
+      {"edge_contrast", [](PhotoHullOptions& p) { p.edge_contrast = 0; }},
+  };
+  for (const auto& [field, spoil] : bad_photo) {
+    PhotoHullOptions p;
+    spoil(p);
+    EXPECT_THROW(p.validate(), Error) << field;
+  }
 
   const StudioFrame f = makeStudioFrame(4.0, 320, 180);
   Carver carver(f.witnesses, HullOptions{});

@@ -52,12 +52,6 @@ std::string selfPath() {
   return p.string();
 }
 
-ErrorContext fileContext(const fs::path& file) {
-  ErrorContext c;
-  c.file = file.string();
-  return c;
-}
-
 int runPlan(const BatchArgs& a) {
   batch::PlanOptions o;
   for (const std::string& t : a.takes) o.takes.push_back(t);

@@ -28,12 +28,6 @@ struct LensArgs {
   bool json = false;
 };
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
 std::vector<std::string> splitComma(const std::string& text) {
   std::vector<std::string> parts;
   std::stringstream s(text);

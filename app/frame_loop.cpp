@@ -21,12 +21,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
 Error frameError(const std::string& stage, int frame, const std::exception& e) {
   ErrorContext c;
   if (const auto* pe = dynamic_cast<const Error*>(&e)) c = pe->context();

@@ -21,12 +21,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-ErrorContext fileContext(const fs::path& file) {
-  ErrorContext c;
-  c.file = file.string();
-  return c;
-}
-
 std::vector<std::string> taskCommand(const Manifest& m, int shard) {
   return {m.previz.string(), "batch", "task", m.job_dir.string(), "--shard", std::to_string(shard)};
 }

@@ -22,12 +22,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-ErrorContext fileContext(const fs::path& file) {
-  ErrorContext c;
-  c.file = file.string();
-  return c;
-}
-
 void copyAtomic(const fs::path& from, const fs::path& to) { writeFileAtomic(to, readTextFile(from)); }
 
 std::string htmlEscape(const std::string& s) {

@@ -18,17 +18,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-ErrorContext fileContext(const fs::path& file) {
-  ErrorContext c;
-  c.file = file.string();
-  return c;
-}
-
 // Frames of a take as carving/take.cpp finds them: every cams/<camera>/%06d.png of a rig
 // camera, and 0 .. frames-1 of take.json. The task checks that `previz carve` selected the
 // same frames, so a difference cannot pass unnoticed.

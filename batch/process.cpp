@@ -13,12 +13,6 @@
 namespace previz::batch {
 namespace {
 
-ErrorContext fileContext(const std::string& file) {
-  ErrorContext c;
-  c.file = file;
-  return c;
-}
-
 // Everything the child needs is prepared before fork(): after it only async-signal-safe calls.
 struct Prepared {
   std::vector<std::string> storage;

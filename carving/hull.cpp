@@ -61,7 +61,6 @@ std::string num(double v) {
   return buf;
 }
 
-
 double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
       .count();
@@ -71,7 +70,7 @@ double msSince(std::chrono::steady_clock::time_point start) {
 
 void HullOptions::validate() const {
   auto bad = [](const std::string& field, const std::string& message) {
-    throw Error("carve: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+    throw Error("carve: " + field + " " + message, fieldContext(field));
   };
   if (!(voxel_m > 0.0) || !std::isfinite(voxel_m))
     bad("voxel_m", "must be a finite value > 0 (got " + num(voxel_m) + ")");
@@ -559,11 +558,11 @@ Carver::Carver(std::vector<RigCamera> cameras, const HullOptions& options)
     : impl_(std::make_unique<Impl>()) {
   options.validate();
   if (cameras.empty())
-    throw Error("carve: no cameras to carve with", ErrorContext{"", "", std::nullopt, "cameras"});
+    throw Error("carve: no cameras to carve with", fieldContext("cameras"));
   if (static_cast<int>(cameras.size()) > detail::kMaxCameras)
     throw Error("carve: at most " + std::to_string(detail::kMaxCameras) + " cameras (got " +
                     std::to_string(cameras.size()) + ")",
-                ErrorContext{"", "", std::nullopt, "cameras"});
+                fieldContext("cameras"));
   auto models = std::make_shared<std::vector<CameraModel>>();
   for (const RigCamera& c : cameras) models->push_back(detail::makeCameraModel(c));
   impl_->cameras = std::move(cameras);
@@ -576,7 +575,6 @@ Carver::~Carver() = default;
 
 const std::vector<RigCamera>& Carver::cameras() const { return impl_->cameras; }
 const HullOptions& Carver::options() const { return impl_->options; }
-
 
 namespace {
 
@@ -750,11 +748,11 @@ VisualHull Carver::carve(const Silhouettes& silhouettes) {
   if (static_cast<int>(silhouettes.masks.size()) != n)
     throw Error("carve: got " + std::to_string(silhouettes.masks.size()) + " silhouettes for " +
                     std::to_string(n) + " cameras",
-                ErrorContext{"", "", std::nullopt, "masks"});
+                fieldContext("masks"));
   if (!silhouettes.dropped.empty() && static_cast<int>(silhouettes.dropped.size()) != n)
     throw Error("carve: got " + std::to_string(silhouettes.dropped.size()) +
                     " drop reasons for " + std::to_string(n) + " cameras",
-                ErrorContext{"", "", std::nullopt, "dropped"});
+                fieldContext("dropped"));
   const int threads = threadCount(im.options.threads);
 
   auto data = std::make_shared<HullData>();

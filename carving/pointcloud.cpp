@@ -25,12 +25,6 @@ namespace {
 
 const char* kFrameNote = "world frame, metres, z up (previz docs/conventions.md); normals outward";
 
-ErrorContext fileContext(const fs::path& path) {
-  ErrorContext context;
-  context.file = path.string();
-  return context;
-}
-
 Eigen::Vector3f faceNormal(const TriangleMesh& mesh, const Eigen::Vector3i& f) {
   const Eigen::Vector3f a = mesh.vertices[f[0]], b = mesh.vertices[f[1]], c = mesh.vertices[f[2]];
   return (b - a).cross(c - a);  // counter-clockwise from outside: points out; length = 2 area

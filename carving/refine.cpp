@@ -364,7 +364,7 @@ double msSince(std::chrono::steady_clock::time_point start) {
 
 void RefineOptions::validate() const {
   auto bad = [](const std::string& field, const std::string& message) {
-    throw Error("refine: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+    throw Error("refine: " + field + " " + message, fieldContext(field));
   };
   if (!(search_m > 0) || !std::isfinite(search_m))
     bad("search_m", "must be a finite value > 0 (got " + num(search_m) + ")");
@@ -412,7 +412,7 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
 void PhotoHullOptions::validate() const {
   refine.validate();
   auto bad = [](const std::string& field, const std::string& message) {
-    throw Error("photo hull: " + field + " " + message, ErrorContext{"", "", std::nullopt, field});
+    throw Error("photo hull: " + field + " " + message, fieldContext(field));
   };
   if (rounds < 0) bad("rounds", "must be >= 0 (got " + std::to_string(rounds) + ")");
   if (!(free_m > 0) || !std::isfinite(free_m))

@@ -28,12 +28,6 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
 // Whole string to int, or nullopt.
 std::optional<int> toInt(const std::string& text) {
   if (text.empty()) return std::nullopt;

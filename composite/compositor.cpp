@@ -20,12 +20,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
 int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
 // IEC 61966-2-1.

@@ -142,12 +142,6 @@ inline bool inDomainXY(const Distortion& d, bool tangential, double s_max, doubl
   return !tangential || distortJacobianXY(d, x, y).det() > 0.0;
 }
 
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
 ErrorContext cameraContext(const std::string& camera, const std::string& field) {
   ErrorContext c;
   c.camera = camera;

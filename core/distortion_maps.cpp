@@ -19,13 +19,6 @@ constexpr const char* kStConvention =
     "output pixel, W x H the source size; (s, t) = (0, 0) is the bottom-left corner of the "
     "source image (Nuke STMap)";
 
-ErrorContext fileContext(const fs::path& path, const std::string& field = {}) {
-  ErrorContext c;
-  c.file = path.string();
-  c.field = field;
-  return c;
-}
-
 void checkCamera(const Camera& c, const char* role) {
   try {
     c.validate();

@@ -15,6 +15,19 @@ struct ErrorContext {
   std::string field;   // JSON/YAML field or option name, if any
 };
 
+// The usual contexts: a file (and a field in it), or a field / option.
+inline ErrorContext fileContext(const std::string& file, const std::string& field = {}) {
+  ErrorContext c;
+  c.file = file;
+  c.field = field;
+  return c;
+}
+inline ErrorContext fieldContext(const std::string& field) {
+  ErrorContext c;
+  c.field = field;
+  return c;
+}
+
 class Error : public std::runtime_error {
  public:
   explicit Error(const std::string& message, ErrorContext context = {});

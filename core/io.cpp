@@ -31,12 +31,6 @@ namespace previz {
 
 namespace {
 
-ErrorContext fileContext(const fs::path& path) {
-  ErrorContext c;
-  c.file = path.string();
-  return c;
-}
-
 // Where the original channel order is kept: OpenEXR lists channels alphabetically.
 constexpr const char* kChannelOrderAttribute = "previz:channels";
 

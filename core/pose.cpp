@@ -9,16 +9,6 @@
 
 namespace previz {
 
-namespace {
-
-ErrorContext fieldContext(const std::string& field) {
-  ErrorContext c;
-  c.field = field;
-  return c;
-}
-
-}  // namespace
-
 Pose lookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up) {
   const Eigen::Vector3d forward = target - eye;
   if (!(forward.norm() > 0.0) || !forward.allFinite())

@@ -365,6 +365,49 @@ TEST(RefineDepth, PhotoHullOnFramesItWasNotTunedOn) {
   EXPECT_GE(met, 7);
 }
 
+// Fewer witnesses (issue 5 allows 4 to 16): the frame's plates and masks for the witnesses
+// i * 8 / n of the studio's eight (n = 6: all but two; n = 4: every other one), the same main
+// camera. The photo hull needs two witnesses that agree and one that sees through the air, so
+// with fewer of them it carves less and pushes more depth behind; measured at 10 cm
+// (hull -> photo hull in front / photo hull behind; the hull is >= 99.94 % behind on all):
+//   6 witnesses: t = 1 s 88.56 -> 98.76 / 98.95 %, t = 4 s 97.40 -> 99.47 / 99.55 %,
+//                t = 7 s 87.62 -> 95.00 / 99.75 %
+//   4 witnesses: t = 1 s 79.19 -> 97.06 / 98.91 %, t = 4 s 91.27 -> 98.84 / 99.25 %,
+//                t = 7 s 87.23 -> 93.51 / 98.88 %
+// (8 witnesses: tests above.) Item 2's 99.5 % is for the full rig; asserted here: still at
+// least 2 points better in front than the hull, and >= 98.5 % behind.
+TEST(RefineDepth, PhotoHullWithFewerWitnesses) {
+  for (const double t : {1.0, 4.0, 7.0}) {
+    const PlateFrame full = makePlateFrame(t);
+    for (const int n : {6, 4}) {
+      PlateFrame f = full;
+      f.studio.witnesses.clear();
+      f.studio.masks.clear();
+      f.witness_plates.clear();
+      for (int i = 0; i < n; ++i) {
+        const size_t c = static_cast<size_t>(i * 8 / n);
+        f.studio.witnesses.push_back(full.studio.witnesses[c]);
+        f.studio.masks.push_back(full.studio.masks[c]);
+        f.witness_plates.push_back(full.witness_plates[c]);
+      }
+      const CarvedFrame c(f);
+      const cv::Mat photo = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate,
+                                           c.hull_depth, f.witness_plates, f.studio.masks);
+      const cv::Mat& truth = f.studio.main_raster.depth;
+      const double hull_front = orderedFraction(c.hull_depth, truth, 0.10, true);
+      const double hull_behind = orderedFraction(c.hull_depth, truth, 0.10, false);
+      const double front = orderedFraction(photo, truth, 0.10, true);
+      const double behind = orderedFraction(photo, truth, 0.10, false);
+      std::printf("  %d witnesses, t = %.1f s, 10 cm: hull %.2f / %.2f %% | photo hull in front %.2f %%, "
+                  "behind %.2f %%\n",
+                  n, t, 100 * hull_front, 100 * hull_behind, 100 * front, 100 * behind);
+      expectBeyondHull(c.hull_depth, photo, "photoHullDepth, fewer witnesses");
+      EXPECT_GE(front, hull_front + 0.02) << n << " witnesses, t = " << t;
+      EXPECT_GE(behind, 0.985) << n << " witnesses, t = " << t;
+    }
+  }
+}
+
 TEST(RefineDepth, RejectsBadOptionsAndInputs) {
   RefineOptions o;
   o.step_m = 0;

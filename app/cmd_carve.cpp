@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "app/progress.h"
 #include "carving/run.h"
 #include "carving/take.h"
@@ -29,39 +30,13 @@ struct CarveArgs {
   bool quiet = false;
 };
 
-ErrorContext flag(const std::string& name) {
-  ErrorContext c;
-  c.field = name;
-  return c;
-}
-
 // "x0,y0,z0,x1,y1,z1" (metres, world) -> box; throws naming --volume.
 Eigen::AlignedBox3d parseVolume(const std::string& text) {
-  std::vector<double> v;
-  std::stringstream in(text);
-  for (std::string item; std::getline(in, item, ',');) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) v.clear();
-    } catch (const std::exception&) {
-      v.clear();
-      break;
-    }
-  }
-  if (v.size() != 6 || !(v[0] < v[3] && v[1] < v[4] && v[2] < v[5]))
-    throw Error("expected x0,y0,z0,x1,y1,z1 in metres with x0 < x1, y0 < y1, z0 < z1 (got '" +
-                    text + "')",
-                flag("--volume"));
+  const std::string form = "x0,y0,z0,x1,y1,z1 in metres with x0 < x1, y0 < y1, z0 < z1";
+  const std::vector<double> v = parseNumbers(text, 6, "--volume", form);
+  if (!(v[0] < v[3] && v[1] < v[4] && v[2] < v[5]))
+    throw Error("expected " + form + " (got '" + text + "')", fieldContext("--volume"));
   return Eigen::AlignedBox3d(Eigen::Vector3d(v[0], v[1], v[2]), Eigen::Vector3d(v[3], v[4], v[5]));
-}
-
-std::vector<std::string> splitNames(const std::string& text) {
-  std::vector<std::string> names;
-  std::stringstream in(text);
-  for (std::string name; std::getline(in, name, ',');)
-    if (!name.empty()) names.push_back(name);
-  return names;
 }
 
 int runCarve(const CarveArgs& a) {
@@ -75,7 +50,7 @@ int runCarve(const CarveArgs& a) {
   o.hull.threads = a.threads;
   if (!a.volume.empty()) o.hull.volume = parseVolume(a.volume);
   o.depth_camera = a.depth_camera;
-  o.carve_cameras = splitNames(a.cameras);
+  o.carve_cameras = splitList(a.cameras);
   o.depth_inside_silhouette = !a.depth_everywhere;
   o.refine_depth = a.refine;
   o.refine.threads = a.threads;
@@ -87,7 +62,7 @@ int runCarve(const CarveArgs& a) {
   if (a.depth_cameras == "all") {
     for (const RigCamera& rc : take.rig().cameras) o.extra_depth_cameras.push_back(rc.camera.name);
   } else {
-    o.extra_depth_cameras = splitNames(a.depth_cameras);
+    o.extra_depth_cameras = splitList(a.depth_cameras);
   }
   carving::CarveJob job(take, o);
   const std::vector<int> selected = job.selectedFrames();

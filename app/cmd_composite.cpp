@@ -29,12 +29,6 @@ struct CompositeArgs {
   bool layers = false, exr = false, json = false, quiet = false;
 };
 
-ErrorContext flag(const std::string& name) {
-  ErrorContext c;
-  c.field = name;
-  return c;
-}
-
 std::string stem(int frame) {
   char s[32];
   std::snprintf(s, sizeof(s), "%06d", frame);
@@ -49,7 +43,7 @@ int runComposite(const CompositeArgs& a) {
   std::string main_name;
   for (const RigCamera& rc : take.rig().cameras)
     if (rc.role == "main") main_name = rc.camera.name;
-  if (main_name.empty()) throw Error("the rig has no camera with role 'main'", flag("--rig"));
+  if (main_name.empty()) throw Error("the rig has no camera with role 'main'", fieldContext("--rig"));
   Camera lens = take.rig().at(main_name).camera;
   if (!a.lens.empty()) {
     const calib::LensTableEntry e = calib::readLensTable(a.lens).at(a.focus, a.zoom);
@@ -85,7 +79,7 @@ int runComposite(const CompositeArgs& a) {
   std::vector<int> frames;
   for (int f : take.frames())
     if (range.contains(f)) frames.push_back(f);
-  if (frames.empty()) throw Error("no frame of the take is in the range", flag("--frames"));
+  if (frames.empty()) throw Error("no frame of the take is in the range", fieldContext("--frames"));
 
   ProgressLine progress("composite", static_cast<int>(frames.size()), a.quiet);
   composite::CompositeStats total;

@@ -36,16 +36,6 @@ std::vector<std::string> splitComma(const std::string& text) {
   return parts;
 }
 
-double parseNumber(const std::string& text, const std::string& flag) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used == text.size()) return v;
-  } catch (const std::exception&) {
-  }
-  throw Error("expected a number (got '" + text + "')", fieldContext(flag));
-}
-
 calib::LensTable buildTable(const LensArgs& a) {
   calib::LensTable table;
   if (!a.table.empty()) {

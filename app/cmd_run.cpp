@@ -37,12 +37,6 @@ using Clock = std::chrono::steady_clock;
 
 double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-ErrorContext flag(const std::string& name) {
-  ErrorContext c;
-  c.field = name;
-  return c;
-}
-
 std::string stem(int frame) {
   char s[32];
   std::snprintf(s, sizeof(s), "%06d", frame);
@@ -99,7 +93,7 @@ struct Loaded {
 // The props to track: --props, else the take's props.json when it has a carried prop.
 std::optional<tracking::PropSet> runProps(const fs::path& take_dir, const LoopArgs& a, std::string& note) {
   if (a.no_props) {
-    if (!a.props.empty()) throw Error("--props and --no-props exclude each other", flag("--no-props"));
+    if (!a.props.empty()) throw Error("--props and --no-props exclude each other", fieldContext("--no-props"));
     return std::nullopt;
   }
   const fs::path path = a.props.empty() ? take_dir / "props.json" : fs::path(a.props);
@@ -118,7 +112,6 @@ std::optional<tracking::PropSet> runProps(const fs::path& take_dir, const LoopAr
   note = std::to_string(carried) + " props of " + path.string();
   return set;
 }
-
 
 Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   Loaded l;
@@ -149,7 +142,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
     std::string main_name;
     for (const RigCamera& rc : rig.cameras)
       if (rc.role == "main") main_name = rc.camera.name;
-    if (main_name.empty()) throw Error("the rig has no main camera for --lens", flag("--lens"));
+    if (main_name.empty()) throw Error("the rig has no main camera for --lens", fieldContext("--lens"));
     RigCamera& main = rig.at(main_name);
     Camera lens = e.camera;
     if (lens.width != main.camera.width || lens.height != main.camera.height)
@@ -190,20 +183,20 @@ nlohmann::json stageJson(const std::vector<StageTime>& times) {
 }
 
 int runRun(const RunArgs& a) {
-  if (a.out.empty()) throw Error("an output folder is required", flag("--out"));
+  if (a.out.empty()) throw Error("an output folder is required", fieldContext("--out"));
   Loaded l = load(a.take, a.loop, a.layers || a.exr);
   const carving::FrameRange range = a.frames.empty() ? carving::FrameRange{} : carving::parseFrameRange(a.frames);
   std::vector<int> frames;
   for (int f : l.take->frames())
     if (range.contains(f)) frames.push_back(f);
-  if (frames.empty() && a.live.empty()) throw Error("no frame of the take is in the range", flag("--frames"));
+  if (frames.empty() && a.live.empty()) throw Error("no frame of the take is in the range", fieldContext("--frames"));
   std::unique_ptr<LiveReader> live;
   if (!a.live.empty()) {
     LiveOptions lo;
     for (const std::string& item : a.live) {
       const size_t eq = item.find('=');
       if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
-        throw Error("expected NAME=SOURCE (device index, file or GStreamer pipeline), got '" + item + "'", flag("--live"));
+        throw Error("expected NAME=SOURCE (device index, file or GStreamer pipeline), got '" + item + "'", fieldContext("--live"));
       lo.sources[item.substr(0, eq)] = item.substr(eq + 1);
     }
     lo.pace = !a.no_pace;
@@ -298,7 +291,7 @@ int runRun(const RunArgs& a) {
                    live ? (" | dropped " + std::to_string(live->dropped())).c_str() : "");
     }
   }
-  if (ran.empty()) throw Error("no frame was run (the live sources gave none)", flag("--live"));
+  if (ran.empty()) throw Error("no frame was run (the live sources gave none)", fieldContext("--live"));
   frames = ran;
   writer.close();
   writeFileAtomic(out / "poses.jsonl", poses);

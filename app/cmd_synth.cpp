@@ -48,26 +48,6 @@ std::pair<std::string, std::string> splitNamed(const std::string& text, const st
   return {text.substr(0, eq), text.substr(eq + 1)};
 }
 
-// Comma-separated finite numbers, exactly 'count' of them.
-std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& flag,
-                                 const std::string& form) {
-  std::vector<double> values;
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    try {
-      size_t used = 0;
-      const double v = std::stod(item, &used);
-      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument(item);
-      values.push_back(v);
-    } catch (const std::exception&) {
-      badFlag(flag, "expected " + form + " (got '" + text + "')");
-    }
-  }
-  if (values.size() != count) badFlag(flag, "expected " + form + " (got '" + text + "')");
-  return values;
-}
-
 // --delay NAME=FRAMES
 void parseDelay(const std::string& text, synth::SynthOptions& o) {
   const std::string form = "NAME=FRAMES, e.g. witness03=2";

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "app/progress.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -15,37 +16,6 @@
 
 namespace previz::app {
 namespace {
-
-ErrorContext flag(const std::string& name) {
-  ErrorContext c;
-  c.field = name;
-  return c;
-}
-
-std::vector<std::string> splitList(const std::string& text, char sep = ',') {
-  std::vector<std::string> out;
-  std::stringstream in(text);
-  for (std::string item; std::getline(in, item, sep);)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
-std::vector<double> parseNumbers(const std::string& text, size_t n, const std::string& name) {
-  std::vector<double> v;
-  for (const std::string& item : splitList(text)) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) v.clear();
-    } catch (const std::exception&) {
-      v.clear();
-      break;
-    }
-  }
-  if (v.size() != n)
-    throw Error("expected " + std::to_string(n) + " comma-separated numbers (got '" + text + "')", flag(name));
-  return v;
-}
 
 struct TrackArgs {
   std::string take, rig, props, out, udp, main_poses, cameras, truth, frames, shard = "0/1";
@@ -85,7 +55,7 @@ void parseFrames(const std::string& text, tracking::TrackRunOptions& o) {
       if (colon + 1 < text.size()) o.end_frame = std::stoi(text.substr(colon + 1));
     }
   } catch (const std::exception&) {
-    throw Error("expected A:B, A:, :B or A (got '" + text + "')", flag("--frames"));
+    throw Error("expected A:B, A:, :B or A (got '" + text + "')", fieldContext("--frames"));
   }
 }
 
@@ -95,7 +65,7 @@ void parsePerCamera(const std::string& text, const tracking::DetectorOptions& ba
   const auto colon = text.find(':');
   if (colon == std::string::npos || colon == 0)
     throw Error("expected CAMERA:key=value,... (keys decimate, sigma, threads, refine-edges), got '" + text + "'",
-                flag("--detector"));
+                fieldContext("--detector"));
   tracking::DetectorOptions d = base;
   for (const std::string& kv : splitList(text.substr(colon + 1))) {
     const auto eq = kv.find('=');
@@ -107,13 +77,13 @@ void parsePerCamera(const std::string& text, const tracking::DetectorOptions& ba
       value = std::stod(kv.substr(eq + 1), &used);
       if (used != kv.size() - eq - 1) throw std::invalid_argument(kv);
     } catch (const std::exception&) {
-      throw Error("expected key=number in '" + text + "'", flag("--detector"));
+      throw Error("expected key=number in '" + text + "'", fieldContext("--detector"));
     }
     if (key == "decimate") d.decimate = static_cast<float>(value);
     else if (key == "sigma") d.sigma = static_cast<float>(value);
     else if (key == "threads") d.threads = static_cast<int>(value);
     else if (key == "refine-edges") d.refine_edges = value != 0;
-    else throw Error("unknown key '" + key + "' (decimate, sigma, threads, refine-edges)", flag("--detector"));
+    else throw Error("unknown key '" + key + "' (decimate, sigma, threads, refine-edges)", fieldContext("--detector"));
   }
   out[text.substr(0, colon)] = d;
 }
@@ -138,10 +108,10 @@ int runTrack(const TrackArgs& a) {
   for (const char* f : {"--take", "--rig", "--props", "--out"}) {
     const std::string& v = std::string(f) == "--take" ? a.take : std::string(f) == "--rig" ? a.rig
                            : std::string(f) == "--props" ? a.props : a.out;
-    if (v.empty()) throw Error(std::string("track: ") + f + " is required (or use `track prop` / `track camera`)", flag(f));
+    if (v.empty()) throw Error(std::string("track: ") + f + " is required (or use `track prop` / `track camera`)", fieldContext(f));
   }
-  if (a.freed && a.otio) throw Error("choose one of --freed and --otio", flag("--otio"));
-  if ((a.freed || a.otio) && a.udp.empty()) throw Error("--freed / --otio stream to --udp HOST:PORT", flag("--udp"));
+  if (a.freed && a.otio) throw Error("choose one of --freed and --otio", fieldContext("--otio"));
+  if ((a.freed || a.otio) && a.udp.empty()) throw Error("--freed / --otio stream to --udp HOST:PORT", fieldContext("--udp"));
   tracking::TrackInput in;
   in.take = a.take;
   in.rig = a.rig;
@@ -164,7 +134,7 @@ int runTrack(const TrackArgs& a) {
       o.shard_count = std::stoi(a.shard.substr(slash + 1), &un);
       if (ui != slash || un != a.shard.size() - slash - 1) throw std::invalid_argument(a.shard);
     } catch (const std::exception&) {
-      throw Error("expected i/n with 0 <= i < n, e.g. 0/4 (got '" + a.shard + "')", flag("--shard"));
+      throw Error("expected i/n with 0 <= i < n, e.g. 0/4 (got '" + a.shard + "')", fieldContext("--shard"));
     }
   }
   o.frame_files = a.frame_files;
@@ -261,11 +231,11 @@ int runProp(const PropArgs& a) {
       o.rows = std::stoi(a.grid.substr(0, x));
       o.cols = std::stoi(a.grid.substr(x + 1));
     } catch (const std::exception&) {
-      throw Error("expected ROWSxCOLS (got '" + a.grid + "')", flag("--grid"));
+      throw Error("expected ROWSxCOLS (got '" + a.grid + "')", fieldContext("--grid"));
     }
     prop = tracking::makePlateProp(o);
   } else {
-    throw Error("unknown shape '" + a.shape + "' (box, plate)", flag("--shape"));
+    throw Error("unknown shape '" + a.shape + "' (box, plate)", fieldContext("--shape"));
   }
   tracking::PropSet set;
   if (a.append && std::filesystem::exists(a.out)) set = tracking::readProps(a.out);

@@ -1,7 +1,10 @@
 #pragma once
 // Small parsers shared by the subcommands.
+#include <cmath>
+#include <sstream>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/error.h"
 
@@ -19,10 +22,52 @@ inline std::pair<int, int> parseSize(const std::string& text, const std::string&
     }
   } catch (const std::exception&) {
   }
-  ErrorContext context;
-  context.field = flag;
   throw Error("expected WIDTHxHEIGHT with positive integers, e.g. 1280x720 (got '" + text + "')",
-              context);
+              fieldContext(flag));
+}
+
+// "a,b,,c" -> {a, b, c}: the non-empty items between the separators.
+inline std::vector<std::string> splitList(const std::string& text, char sep = ',') {
+  std::vector<std::string> out;
+  std::stringstream in(text);
+  for (std::string item; std::getline(in, item, sep);)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+// One finite number, all of 'text'; throws Error naming the flag otherwise.
+inline double parseNumber(const std::string& text, const std::string& flag) {
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used == text.size() && std::isfinite(v)) return v;
+  } catch (const std::exception&) {
+  }
+  throw Error("expected a number (got '" + text + "')", fieldContext(flag));
+}
+
+// Exactly 'count' comma-separated finite numbers; otherwise an Error naming the flag that says
+// "expected <form> (got '<text>')" (form: by default "<count> comma-separated numbers").
+inline std::vector<double> parseNumbers(const std::string& text, size_t count,
+                                        const std::string& flag, std::string form = {}) {
+  if (form.empty()) form = std::to_string(count) + " comma-separated numbers";
+  std::vector<double> values;
+  bool ok = true;
+  std::stringstream in(text);
+  for (std::string item; ok && std::getline(in, item, ',');) {
+    size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    ok = used > 0 && used == item.size() && std::isfinite(v);
+    values.push_back(v);
+  }
+  if (!ok || values.size() != count)
+    throw Error("expected " + form + " (got '" + text + "')", fieldContext(flag));
+  return values;
 }
 
 }  // namespace previz::app

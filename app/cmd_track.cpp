@@ -70,15 +70,9 @@ void parsePerCamera(const std::string& text, const tracking::DetectorOptions& ba
   for (const std::string& kv : splitList(text.substr(colon + 1))) {
     const auto eq = kv.find('=');
     const std::string key = kv.substr(0, eq);
-    double value = 0;
-    try {
-      if (eq == std::string::npos) throw std::invalid_argument(kv);
-      size_t used = 0;
-      value = std::stod(kv.substr(eq + 1), &used);
-      if (used != kv.size() - eq - 1) throw std::invalid_argument(kv);
-    } catch (const std::exception&) {
-      throw Error("expected key=number in '" + text + "'", fieldContext("--detector"));
-    }
+    const auto number = eq == std::string::npos ? std::nullopt : finiteNumber(kv.substr(eq + 1));
+    if (!number) throw Error("expected key=number in '" + text + "'", fieldContext("--detector"));
+    const double value = *number;
     if (key == "decimate") d.decimate = static_cast<float>(value);
     else if (key == "sigma") d.sigma = static_cast<float>(value);
     else if (key == "threads") d.threads = static_cast<int>(value);

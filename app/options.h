@@ -1,6 +1,7 @@
 #pragma once
 // Small parsers shared by the subcommands.
 #include <cmath>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -35,14 +36,20 @@ inline std::vector<std::string> splitList(const std::string& text, char sep = ',
   return out;
 }
 
-// One finite number, all of 'text'; throws Error naming the flag otherwise.
-inline double parseNumber(const std::string& text, const std::string& flag) {
+// 'text' read whole as one finite number; nullopt otherwise.
+inline std::optional<double> finiteNumber(const std::string& text) {
   try {
     size_t used = 0;
     const double v = std::stod(text, &used);
     if (used == text.size() && std::isfinite(v)) return v;
   } catch (const std::exception&) {
   }
+  return std::nullopt;
+}
+
+// One finite number, all of 'text'; throws Error naming the flag otherwise.
+inline double parseNumber(const std::string& text, const std::string& flag) {
+  if (const auto v = finiteNumber(text)) return *v;
   throw Error("expected a number (got '" + text + "')", fieldContext(flag));
 }
 
@@ -51,22 +58,15 @@ inline double parseNumber(const std::string& text, const std::string& flag) {
 inline std::vector<double> parseNumbers(const std::string& text, size_t count,
                                         const std::string& flag, std::string form = {}) {
   if (form.empty()) form = std::to_string(count) + " comma-separated numbers";
+  const auto bad = [&] { return Error("expected " + form + " (got '" + text + "')", fieldContext(flag)); };
   std::vector<double> values;
-  bool ok = true;
   std::stringstream in(text);
-  for (std::string item; ok && std::getline(in, item, ',');) {
-    size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    ok = used > 0 && used == item.size() && std::isfinite(v);
-    values.push_back(v);
+  for (std::string item; std::getline(in, item, ',');) {
+    const auto v = finiteNumber(item);
+    if (!v) throw bad();
+    values.push_back(*v);
   }
-  if (!ok || values.size() != count)
-    throw Error("expected " + form + " (got '" + text + "')", fieldContext(flag));
+  if (values.size() != count) throw bad();
   return values;
 }
 

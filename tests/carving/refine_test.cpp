@@ -140,6 +140,12 @@ struct CarvedFrame {
       : carver(f.studio.witnesses, fine()),
         hull(carver.carve(masks(f))),
         hull_depth(carver.depth(hull, f.studio.main, f.studio.main_raster.mask)) {}
+  // photoHullDepth of f's main camera from this hull (f: the frame it was carved from).
+  cv::Mat photoHull(const PlateFrame& f, const PhotoHullOptions& options = {},
+                    PhotoHullStats* stats = nullptr) const {
+    return photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth, f.witness_plates,
+                          f.studio.masks, options, stats);
+  }
   Carver carver;
   VisualHull hull;
   cv::Mat hull_depth;
@@ -162,8 +168,7 @@ Result run(const PlateFrame& f, const char* label, bool photo_hull = false) {
               label, r.stats.pixels, r.stats.inconsistent, r.stats.moved, r.stats.ms);
   cv::Mat photo;
   if (photo_hull) {
-    photo = photoHullDepth(carver, hull, f.studio.main, f.main_plate, hull_depth, f.witness_plates,
-                           f.studio.masks, PhotoHullOptions{}, &r.photo_stats);
+    photo = c.photoHull(f, {}, &r.photo_stats);
     r.photo = ordering(photo, truth);
     std::printf("  photo hull: %lld pixels with free space at the hull entry, %lld moved deeper, "
                 "%lld moved across an occlusion edge, %.0f ms per frame (CPU, %.0f ms of it "
@@ -308,11 +313,8 @@ TEST(RefineDepth, OcclusionEdgesGiveTheBlendedPixelsToTheDeeperSurface) {
   PhotoHullOptions off;
   off.edge_jump_m = 0;
   PhotoHullStats with_stats, without_stats;
-  const cv::Mat with = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate, c.hull_depth,
-                                      f.witness_plates, f.studio.masks, {}, &with_stats);
-  const cv::Mat without = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate,
-                                         c.hull_depth, f.witness_plates, f.studio.masks, off,
-                                         &without_stats);
+  const cv::Mat with = c.photoHull(f, {}, &with_stats);
+  const cv::Mat without = c.photoHull(f, off, &without_stats);
   const cv::Mat& truth = f.studio.main_raster.depth;
   const Ordering w = ordering(with, truth), n = ordering(without, truth);
   std::printf("  edges: %lld pixels moved; 10 cm in front %.3f -> %.3f %%, behind %.3f -> %.3f %%\n",
@@ -349,8 +351,7 @@ TEST(RefineDepth, PhotoHullOnFramesItWasNotTunedOn) {
     const PlateFrame f = makePlateFrame(t);
     const CarvedFrame c(f);
     const cv::Mat& hull_depth = c.hull_depth;
-    const cv::Mat photo = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate, hull_depth,
-                                         f.witness_plates, f.studio.masks);
+    const cv::Mat photo = c.photoHull(f);
     const cv::Mat& truth = f.studio.main_raster.depth;
     const double hull_front = orderedFraction(hull_depth, truth, 0.10, true);
     const double front = orderedFraction(photo, truth, 0.10, true);
@@ -391,8 +392,7 @@ TEST(RefineDepth, PhotoHullWithFewerWitnesses) {
         f.witness_plates.push_back(full.witness_plates[c]);
       }
       const CarvedFrame c(f);
-      const cv::Mat photo = photoHullDepth(c.carver, c.hull, f.studio.main, f.main_plate,
-                                           c.hull_depth, f.witness_plates, f.studio.masks);
+      const cv::Mat photo = c.photoHull(f);
       const cv::Mat& truth = f.studio.main_raster.depth;
       const double hull_front = orderedFraction(c.hull_depth, truth, 0.10, true);
       const double hull_behind = orderedFraction(c.hull_depth, truth, 0.10, false);

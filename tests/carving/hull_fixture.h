@@ -189,9 +189,11 @@ struct StudioFrame {
   Raster main_raster;
 };
 
-// undistorted: every lens made ideal; witness_lens: every witness given this distortion.
+// undistorted: every lens made ideal; witness_lens: every witness given this distortion;
+// witness_cameras: the studio rig's witness count (synth::StudioRigOptions).
 inline StudioFrame makeStudioFrame(double time_s, int main_w, int main_h, bool undistorted = false,
-                                   const Distortion* witness_lens = nullptr) {
+                                   const Distortion* witness_lens = nullptr,
+                                   int witness_cameras = 8) {
   StudioFrame f;
   f.time_s = time_s;
   const synth::StudioConfig config;
@@ -199,6 +201,7 @@ inline StudioFrame makeStudioFrame(double time_s, int main_w, int main_h, bool u
   synth::StudioRigOptions rig_options;
   rig_options.main_width = main_w;
   rig_options.main_height = main_h;
+  rig_options.witness_cameras = witness_cameras;
   const Rig rig = synth::studioRig(rig_options, config.take_duration_s, true);
   for (const RigCamera& rc : rig.cameras) {
     RigCamera c = rc;

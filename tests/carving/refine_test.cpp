@@ -37,6 +37,16 @@
 // parts from the key light (as the floor is), the photo hull did worse at 10 cm in front (t = 1 s
 // 99.52 -> 98.82 %, t = 2.5 s 99.60 -> 98.90 %, t = 7 s 95.87 -> 95.52 %), so the studio renders
 // as before.
+// Nor windows instead of pixels (measured once at t = 6.5 s with the witnesses that truly see
+// the point, true depths, a diagnosis only): over 5x5 main pixels on a plane at the candidate
+// depth, the zero-mean normalized cross-correlation of brightness ranks the true depth above
+// ours on 124 of 233 misses, as it ranks it above a point 10 cm in front on 124 of 186 correct
+// pixels: chance, the plates' smooth shading holds nothing to match; the windowed colour
+// distance on 159 of 233, means 0.186 against 0.194, within the noise. Nor a textured costume:
+// the actor's albedo times 1 + 0.3 (or 0.5) x value noise at 3 and 1.2 cm on each part's
+// surface took t = 7 s from 95.87 to 96.75 (97.45) % in front and t = 6.5 s from 97.67 to 97.68
+// (98.13) %, with "behind" down to 98.97 %: of the several witnesses that see the air, the two
+// that agree best still find a match. Sixteen witnesses: PhotoHullWithSixteenWitnesses.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -66,8 +76,8 @@ struct PlateFrame {
 // Gains as a studio sets them (+-10 %), different for every camera.
 double gainOf(int camera) { return 1.0 + 0.1 * std::sin(3.0 * camera + 1.0); }
 
-PlateFrame makePlateFrame(double time_s) {
-  PlateFrame f{makeStudioFrame(time_s, kMainW, kMainH), {}, {}};
+PlateFrame makePlateFrame(double time_s, int witness_cameras = 8) {
+  PlateFrame f{makeStudioFrame(time_s, kMainW, kMainH, false, nullptr, witness_cameras), {}, {}};
   const synth::Studio studio(synth::StudioConfig{});
   const synth::Scene scene = studio.sceneAt(time_s, synth::kLayerStage | synth::kLayerActor);
   auto render = [&](const RigCamera& c, int index) {
@@ -405,6 +415,47 @@ TEST(RefineDepth, PhotoHullWithFewerWitnesses) {
       EXPECT_GE(front, hull_front + 0.02) << n << " witnesses, t = " << t;
       EXPECT_GE(behind, 0.985) << n << " witnesses, t = " << t;
     }
+  }
+}
+
+// The most witnesses issue 5 allows: 16, the studio rig's ring with twice the cameras (the
+// azimuth step halved; heights and distances drawn as for 8), on the two frames where 8 fall
+// furthest short in front (the torso strip between the near upper arm and the backpack, and the
+// trousers between the legs). More silhouettes tighten the hull and give the photo hull more
+// views to see through the air; measured at 10 cm (hull -> photo hull in front / photo hull
+// behind), 8 -> 16 witnesses:
+//   t = 6.5 s: 90.66 -> 97.67 / 99.63 %  ->  94.22 -> 98.21 / 99.30 %
+//   t = 7 s:   91.46 -> 95.87 / 99.73 %  ->  94.00 -> 98.97 / 99.58 %
+// Item 2 is still not met on either. "Behind" falls with 16: half of its misses (62 of 119 at
+// t = 8 s, measured once) are actor pixels at the silhouette's rim where the main ray misses the
+// hull (+inf depth; each added silhouette trims the rim by up to half a pixel; the compositor
+// fills them from a neighbour, composite/compositor.h edge_fill_px), the rest pixels that free
+// space from one more witness moved too deep. Also measured once (diagnostic, all 7 hardest
+// frames 3, 4.5, 6.5, 7, 7.5, 8, 9 s; mean in front / behind, frames meeting item 2): 8 ring
+// 0 of 7; 12 ring 99.13 / 99.61 %, 3 of 7; 16 ring 99.36 / 99.42 %, 1; 16 ring and 4 cameras
+// 4.5-5 m up over the stage 99.68 / 99.35 %, 0 (t = 6.5 s in front 99.15 %). At a 1920x1080
+// main camera: 16 ring 99.39 / 99.43 %, 2 of 7; 12 ring and 4 overhead 99.57 / 99.47 %, 1.
+// Asserted: the hull at least 2 points tighter in front, the photo hull at least 0.5 point
+// better in front and >= 99 % behind, never nearer than the hull.
+TEST(RefineDepth, PhotoHullWithSixteenWitnesses) {
+  for (const double t : {6.5, 7.0}) {
+    Ordering hull[2], photo[2];
+    for (const int i : {0, 1}) {
+      const PlateFrame f = makePlateFrame(t, i == 0 ? 8 : 16);
+      ASSERT_EQ(f.studio.witnesses.size(), i == 0 ? 8u : 16u);
+      const CarvedFrame c(f);
+      const cv::Mat depth = c.photoHull(f);
+      expectBeyondHull(c.hull_depth, depth, "photoHullDepth, 16 witnesses");
+      hull[i] = ordering(c.hull_depth, f.studio.main_raster.depth);
+      photo[i] = ordering(depth, f.studio.main_raster.depth);
+      std::printf("  %2zu witnesses, t = %.1f s, 10 cm: hull %.2f %% | photo hull in front %.2f %%, "
+                  "behind %.2f %%\n",
+                  f.studio.witnesses.size(), t, 100 * hull[i].front[1], 100 * photo[i].front[1],
+                  100 * photo[i].behind[1]);
+    }
+    EXPECT_GE(hull[1].front[1], hull[0].front[1] + 0.02) << t;
+    EXPECT_GE(photo[1].front[1], photo[0].front[1] + 0.005) << t;
+    EXPECT_GE(photo[1].behind[1], 0.99) << t;
   }
 }
 

@@ -60,11 +60,8 @@ int runPlan(const BatchArgs& a) {
   o.main_poses = a.main_poses;
   o.quality = a.quality;
   o.depth_cameras = a.depth_cameras;
-  if (a.refine && a.no_refine) {
-    ErrorContext c;
-    c.field = "--refine";
-    throw Error("batch plan: --refine or --no-refine, not both", c);
-  }
+  if (a.refine && a.no_refine)
+    throw Error("batch plan: --refine or --no-refine, not both", fieldContext("--refine"));
   o.refine = a.refine ? 1 : a.no_refine ? 0 : -1;
   o.voxel_m = a.voxel_m;
   o.point_spacing_m = a.point_spacing_m;

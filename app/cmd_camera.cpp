@@ -41,9 +41,7 @@ int runImport(const CameraArgs& a) {
     }
   } else {
     if (a.size.empty()) {
-      ErrorContext c;
-      c.field = "--size";
-      throw Error("K R t and P rows carry no image size: give --size WxH", c);
+      throw Error("K R t and P rows carry no image size: give --size WxH", fieldContext("--size"));
     }
     const auto [w, h] = parseSize(a.size, "--size");
     rig = !a.krt.empty() ? readKRtRows(a.krt, w, h) : readProjectionRows(a.projection, w, h);

@@ -553,14 +553,12 @@ Runner addDemoCommand(CLI::App& app) {
     }
     o.validate();
     if (!a->no_calibrate && a->views < 3) {
-      ErrorContext context;
-      context.field = "--views";
-      throw Error("demo: --views must be >= 3 (got " + std::to_string(a->views) + ")", context);
+      throw Error("demo: --views must be >= 3 (got " + std::to_string(a->views) + ")",
+                  fieldContext("--views"));
     }
     if (!a->no_calibrate && a->rig_frames < 10) {
-      ErrorContext context;
-      context.field = "--rig-frames";
-      throw Error("demo: --rig-frames must be >= 10 (got " + std::to_string(a->rig_frames) + ")", context);
+      throw Error("demo: --rig-frames must be >= 10 (got " + std::to_string(a->rig_frames) + ")",
+                  fieldContext("--rig-frames"));
     }
     const fs::path out(a->out);
     const fs::path take = out / "take";

@@ -28,6 +28,8 @@ struct LensArgs {
   bool json = false;
 };
 
+// "a,,b" -> {a, "", b}: every item, empty ones too (--entry mixes numbers and a path, so an
+// empty item must reach parseNumber and be refused there, not vanish as splitList drops it).
 std::vector<std::string> splitComma(const std::string& text) {
   std::vector<std::string> parts;
   std::stringstream s(text);
@@ -65,10 +67,9 @@ calib::LensTable buildTable(const LensArgs& a) {
     }
   }
   if (!a.sensor_mm.empty()) {
-    const auto parts = splitComma(a.sensor_mm);
-    if (parts.size() != 2) throw Error("expected WIDTH_MM,HEIGHT_MM", fieldContext("--sensor-mm"));
-    table.sensor_width_mm = parseNumber(parts[0], "--sensor-mm");
-    table.sensor_height_mm = parseNumber(parts[1], "--sensor-mm");
+    const std::vector<double> mm = parseNumbers(a.sensor_mm, 2, "--sensor-mm", "WIDTH_MM,HEIGHT_MM");
+    table.sensor_width_mm = mm[0];
+    table.sensor_height_mm = mm[1];
   }
   table.validate();
   return table;
@@ -98,10 +99,8 @@ int runLens(const LensArgs& a) {
   for (const auto& w : written) std::cerr << "calib lens: wrote " << w << "\n";
   summary["files"] = written;
   if (!a.at.empty()) {
-    const auto parts = splitComma(a.at);
-    if (parts.size() != 2) throw Error("expected FOCUS,ZOOM", fieldContext("--at"));
-    const calib::LensTableEntry e =
-        table.at(parseNumber(parts[0], "--at"), parseNumber(parts[1], "--at"));
+    const std::vector<double> at = parseNumbers(a.at, 2, "--at", "FOCUS,ZOOM");
+    const calib::LensTableEntry e = table.at(at[0], at[1]);
     std::cerr << "calib lens: at focus " << e.focus << " zoom " << e.zoom << ": fx " << e.camera.fx
               << " fy " << e.camera.fy << " c (" << e.camera.cx << ", " << e.camera.cy << ") k1 "
               << e.camera.dist.k1 << " entrance pupil " << e.entrance_pupil_m << " m"

@@ -47,9 +47,7 @@ struct RigArgs {
 };
 
 Error flagError(const std::string& flag, const std::string& message) {
-  ErrorContext context;
-  context.field = flag;
-  return Error(message, context);
+  return Error(message, fieldContext(flag));
 }
 
 std::string fmt(const char* format, double value) {

@@ -33,9 +33,7 @@ struct SynthArgs {
 };
 
 [[noreturn]] void badFlag(const std::string& flag, const std::string& message) {
-  ErrorContext context;
-  context.field = flag;
-  throw Error(flag + ": " + message, context);
+  throw Error(flag + ": " + message, fieldContext(flag));
 }
 
 // "NAME=VALUE" -> (NAME, VALUE); throws Error naming the flag otherwise.

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/srgb.h"
 
 namespace previz::carving {
 namespace {
@@ -66,29 +67,9 @@ std::string str(T value) {
   return s.str();
 }
 
-// sRGB (IEC 61966-2-1) decode table for 8-bit values.
-const std::array<float, 256>& srgbToLinear() {
-  static const std::array<float, 256> table = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[i] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
-  return table;
-}
-
-std::uint8_t linearToSrgb8(float linear) {
-  if (!(linear > 0)) return 0;
-  if (linear >= 1) return 255;
-  const double c = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
-  return static_cast<std::uint8_t>(std::lround(c * 255.0));
-}
-
 // Smallest 8-bit code whose linear value is >= v (256 when none is).
 int srgbCodeAtLeast(float v) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   return static_cast<int>(std::lower_bound(lut.begin(), lut.end(), v) - lut.begin());
 }
 
@@ -108,7 +89,7 @@ float chromaQ(float r, float g, float b) { return (g - std::max(r, b)) / std::ma
 // (the screen is the largest uniform area of a witness frame), then the per-channel median of
 // the samples in and around that bin. Sampled on a 4-px grid.
 bool estimateKeyColour(const cv::Mat& bgr8, cv::Vec3f& key) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   constexpr int kBins = 32, kStep = 4;
   struct Sample {
     float b, g, r;
@@ -163,7 +144,7 @@ struct ClassifyTables {
 };
 
 ClassifyTables makeTables(const ScreenModel& sm) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   ClassifyTables t;
   const double kappa = std::pow(1.0 - kScreenQFraction * sm.key_q, 1.0 / 2.4);
   t.screen_k = static_cast<int>(std::lround(128.0 * kappa));
@@ -181,7 +162,7 @@ ClassifyTables makeTables(const ScreenModel& sm) {
 // of the two outermost rows / columns that are not screen. Returns an invalid model when the
 // border is (almost) all screen.
 GarbageModel estimateGarbage(const cv::Mat& bgr8, const ClassifyTables& tables) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   std::vector<float> rs, bs, sums;
   auto take = [&](int y, int x) {
     const cv::Vec3b& p = bgr8.at<cv::Vec3b>(y, x);
@@ -300,7 +281,7 @@ void screenRow(const std::uint8_t* px, const std::uint8_t* range, const Classify
 // frames are garbage at once; those touching the remembered zone seed the flood.
 void classifyRows(const cv::Mat& bgr8, const ClassifyParams& p, int y0, int y1, cv::Mat& cls,
                   std::vector<cv::Point>& seeds) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   const ClassifyTables& t = *p.tables;
   const ScreenModel& sm = *p.screen;
   const int W = bgr8.cols, H = bgr8.rows;
@@ -402,7 +383,7 @@ struct Rgb {
 // when it has no foreground to mix with (alpha 0).
 float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, bool use_plate,
                 int x, int y, int radius) {
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   const int x0 = std::max(0, x - radius), x1 = std::min(bgr8.cols - 1, x + radius);
   const int y0 = std::max(0, y - radius), y1 = std::min(bgr8.rows - 1, y + radius);
   auto colour = [&](const cv::Mat& img, int xx, int yy) {
@@ -670,7 +651,7 @@ Keyer::Keyer(const KeyerOptions& options) : options_(options) { options_.validat
 
 void Keyer::setCleanPlate(const cv::Mat& bgr8, const std::string& source) {
   checkImage(bgr8, source);
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   ScreenModel sm;
   sm.from_clean_plate = true;
   sm.plate = bgr8.clone();
@@ -887,7 +868,7 @@ cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& sc
          "despill");
   }
   const bool use_plate = screen.from_clean_plate && screen.plate.size() == bgr8.size();
-  const auto& lut = srgbToLinear();
+  const auto& lut = srgb8ToLinear();
   const int W = bgr8.cols, H = bgr8.rows, radius = options.edge_radius_px;
   cv::Mat out(H, W, CV_8UC3);
   const int threads = threadCount(options.threads);
@@ -906,13 +887,15 @@ cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& sc
         q[2] = p[2];
         continue;
       }
-      const float cb = lut[p[0]], cg = lut[p[1]], cr = lut[p[2]];
       if (alpha <= 0.0f) {
+        // Green limited to max(R, B) in linear light; the decode is monotonic, so that is the
+        // same limit on the codes.
         q[0] = p[0];
-        q[1] = linearToSrgb8(std::min(cg, std::max(cr, cb)));
+        q[1] = std::min(p[1], std::max(p[0], p[2]));
         q[2] = p[2];
         continue;
       }
+      const float cb = lut[p[0]], cg = lut[p[1]], cr = lut[p[2]];
       // Local screen colour: the alpha-0 neighbours (as the keyer's edge alpha).
       float sb = 0, sg = 0, sr = 0, pb = 0, pg = 0, pr = 0;
       int n = 0;

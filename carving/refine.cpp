@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/srgb.h"
 
 namespace previz::carving {
 
@@ -28,19 +29,6 @@ std::string num(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", v);
   return buf;
-}
-
-// sRGB code value -> linear light (IEC 61966-2-1).
-const std::array<float, 256>& srgbToLinear() {
-  static const std::array<float, 256> lut = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double e = i / 255.0;
-      t[i] = static_cast<float>(e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
-  return lut;
 }
 
 // A reference view: a witness, or (photoHullDepth) the depth camera seen from a witness.
@@ -94,7 +82,7 @@ cv::Mat visibilityMap(const Carver& carver, const VisualHull& hull, const RigCam
 // hull's concavities are (measured: 3x3 boxes cost 0.1-0.15 points at 10 cm).
 bool sample(const cv::Mat& bgr, float inv_gain, double u, double v, float* c) {
   if (!(u >= 0 && v >= 0 && u <= bgr.cols - 1 && v <= bgr.rows - 1)) return false;
-  const std::array<float, 256>& lin = srgbToLinear();
+  const std::array<float, 256>& lin = srgb8ToLinear();
   const int u0 = std::min(static_cast<int>(u), bgr.cols - 2);
   const int v0 = std::min(static_cast<int>(v), bgr.rows - 2);
   const float fu = static_cast<float>(u - u0), fv = static_cast<float>(v - v0);
@@ -108,7 +96,7 @@ bool sample(const cv::Mat& bgr, float inv_gain, double u, double v, float* c) {
 
 // Linear colour of the plate's pixel (u, v), divided by the camera's gain.
 void pixelColour(const cv::Mat& bgr, float inv_gain, int u, int v, float* c) {
-  const std::array<float, 256>& lin = srgbToLinear();
+  const std::array<float, 256>& lin = srgb8ToLinear();
   const std::uint8_t* p = bgr.ptr<std::uint8_t>(v) + 3 * u;
   for (int ch = 0; ch < 3; ++ch) c[ch] = inv_gain * lin[p[ch]];
 }
@@ -139,7 +127,7 @@ float colourDistance(const float* a, const float* b) {
 constexpr int kMinGainSamples = 50;
 void estimateGains(const RigCamera& camera, const cv::Mat& bgr, double main_gain,
                    const cv::Mat& hull_depth, std::vector<Witness>& witnesses) {
-  const std::array<float, 256>& lin = srgbToLinear();
+  const std::array<float, 256>& lin = srgb8ToLinear();
   const Camera& cam = camera.camera;
   const Eigen::Vector3d centre = camera.T_world_cam.translation();
   for (Witness& w : witnesses) {

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/srgb.h"
 
 namespace previz::composite {
 namespace {
@@ -22,20 +23,10 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 
 int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
-// IEC 61966-2-1.
-double srgbDecode(double e) { return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4); }
+// IEC 61966-2-1 encode (the decode table is core/srgb.h's).
 double srgbEncode(double l) {
   l = std::clamp(l, 0.0, 1.0);
   return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
-}
-
-const std::array<float, 256>& decodeTable() {
-  static const std::array<float, 256> table = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) t[i] = static_cast<float>(srgbDecode(i / 255.0));
-    return t;
-  }();
-  return table;
 }
 
 // Linear [0, 1] in 65536 steps -> 8-bit sRGB code, rounded as the renderer rounds. The step
@@ -196,7 +187,7 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
     r.layer_front.release();
     r.linear.release();
   }
-  const std::array<float, 256>& dec = decodeTable();
+  const std::array<float, 256>& dec = srgb8ToLinear();
   const std::uint8_t* enc = encodeTable().data();
   const float gain = static_cast<float>(options_.cg_gain);
   const float band = static_cast<float>(options_.depth_band_m);

@@ -1,0 +1,45 @@
+#include "core/srgb.h"
+
+#include <cmath>
+
+namespace previz {
+namespace {
+
+double decode(double e) { return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4); }
+
+// Decision levels: level[i] = linear value of code i + 0.5, i = 0..254; level[255] = +inf pads
+// the search to 256 entries.
+const std::array<double, 256>& decisionLevels() {
+  static const std::array<double, 256> levels = [] {
+    std::array<double, 256> t{};
+    for (int i = 0; i < 255; ++i) t[i] = decode((i + 0.5) / 255.0);
+    t[255] = HUGE_VAL;
+    return t;
+  }();
+  return levels;
+}
+
+}  // namespace
+
+const std::array<float, 256>& srgb8ToLinear() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) t[i] = static_cast<float>(decode(i / 255.0));
+    return t;
+  }();
+  return table;
+}
+
+std::uint8_t linearToSrgb8(float linear) {
+  if (!(linear > 0.0f)) return 0;
+  if (linear >= 1.0f) return 255;
+  const std::array<double, 256>& level = decisionLevels();
+  const double x = linear;
+  // Branch-free binary search for the number of levels <= x (levels ascend; level[255] = inf).
+  int i = 0;
+  for (int step = 128; step > 0; step >>= 1)
+    if (level[i + step - 1] <= x) i += step;
+  return static_cast<std::uint8_t>(i);
+}
+
+}  // namespace previz

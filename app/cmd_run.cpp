@@ -48,7 +48,7 @@ struct LoopArgs {
   std::string rig, main_poses, lens, cg_dir;
   double focus = 0, zoom = 0;
   std::string tracked_main_poses;
-  double voxel_m = 0.005;
+  double voxel_m = kLiveVoxelM;  // frame_loop.h says why 1 cm
   int k = 0;
   double band_m = 0.04;
   double cg_gain = 1.0;
@@ -421,6 +421,10 @@ int runBench(const BenchArgs& a) {
                "stage: %s %.2f ms; reading the PNGs (not in the loop): %.1f ms a frame\n",
                size.c_str(), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(), t, 1000.0 / t, budget_ms,
                t - budget_ms, largest.c_str(), largest_ms, median(read_ms));
+  if (prop_frames > 0 && prop_full_frames == prop_frames)
+    std::fprintf(stderr, "bench run: props searched every camera's whole frame on every frame (these frames are further "
+                 "apart than the tracker's filter bridges); at camera rate it searches predicted regions: "
+                 "build/bench/bench_tracking, track_roi\n");
   std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
                "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
                median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));

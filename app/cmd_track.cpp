@@ -332,7 +332,8 @@ Runner addTrackCommand(CLI::App& app) {
   cmd->add_option("--detector", a->per_camera,
                   "Per-camera detector CAM:decimate=2,sigma=0.8,threads=1,refine-edges=1 (repeatable)");
   cmd->add_option("--threads", a->threads, "OpenMP threads over cameras (0 = all cores)")->capture_default_str();
-  cmd->add_option("--full-every", a->full_every, "Full-frame search every N frames (0 = only on loss)")
+  cmd->add_option("--full-every", a->full_every,
+                  "Each camera searches its whole frame every N frames, staggered over the cameras (0 = only on loss)")
       ->capture_default_str();
   cmd->add_flag("--no-roi", a->no_roi, "Search the full frame every frame");
   cmd->add_flag("--no-filter", a->no_filter, "Report the per-frame solve unfiltered");

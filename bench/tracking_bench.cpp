@@ -8,7 +8,8 @@
 // full-frame search of the same frame in every camera.
 // Besides Google Benchmark's table, one JSON line per case:
 //   {"stage":..., "size":..., "ms":..., "cpu_ms":..., "budget_ms":..., "threads":...}
-// "ms" is the median wall time per frame, "cpu_ms" the median CPU time of the process per frame.
+// "ms" is the median wall time per frame, "ms_max" the worst frame, "ms_mean" the mean, "cpu_ms"
+// the median CPU time of the process per frame.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -195,6 +196,13 @@ int main(int argc, char** argv) {
     std::printf("{\"stage\":\"%s\",\"size\":\"%s\",\"ms\":%.4f,\"ms_min\":%.4f,\"cpu_ms\":%.4f,\"threads\":%d", r.stage.c_str(),
                 r.size.c_str(), median(r.ms), *std::min_element(r.ms.begin(), r.ms.end()), median(r.cpu_ms), r.threads);
     if (r.budget_ms > 0) std::printf(",\"budget_ms\":%.1f", r.budget_ms);
+    if (r.stage.rfind("track_", 0) == 0) {
+      // The worst frame and the mean: the periodic whole-frame searches are the spikes.
+      double sum = 0;
+      for (double m : r.ms) sum += m;
+      std::printf(",\"ms_max\":%.4f,\"ms_mean\":%.4f", *std::max_element(r.ms.begin(), r.ms.end()),
+                  sum / static_cast<double>(r.ms.size()));
+    }
     if (r.stage != "track_full_frame" && full_ms.count(r.threads) && r.stage.rfind("track_", 0) == 0)
       std::printf(",\"speedup_vs_full_frame\":%.2f", full_ms[r.threads] / std::max(1e-9, median(r.ms)));
     if (r.stage == "track_roi" && compared > 0)

@@ -163,11 +163,21 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
 
   bool all_live = !m.tracks.empty();
   for (const auto& t : m.tracks) all_live = all_live && t.live;
-  const bool periodic = m.options.full_frame_every > 0 && m.frames_since_full + 1 >= m.options.full_frame_every;
-  const bool full = !m.options.roi || !m.any_frame || !all_live || periodic;
-  out.full_frame = full;
+  // Every camera searches its whole frame without ROIs, on the first frame, and while a prop is
+  // not tracked. Otherwise the periodic whole-frame search (a new prop, a tag the prediction
+  // misses) is staggered over the cameras: camera c searches whole when (frames since the last
+  // all-camera search + c N / n) is a multiple of N = full_frame_every, so each camera still
+  // does so every N frames, but a frame holds ceil(n / N) such searches, not n (one whole
+  // 1280x720 frame costs about as much as 10 ROI frames: bench_tracking).
+  const bool full = !m.options.roi || !m.any_frame || !all_live;
+  const int every = m.options.full_frame_every;
   m.frames_since_full = full ? 0 : m.frames_since_full + 1;
   m.any_frame = true;
+  std::vector<char> whole(static_cast<size_t>(n_cams), full ? 1 : 0);
+  if (!full && every > 0)
+    for (int c = 0; c < n_cams; ++c)
+      whole[static_cast<size_t>(c)] = (m.frames_since_full + c * every / n_cams) % every == 0;
+  out.full_frame = std::all_of(whole.begin(), whole.end(), [](char w) { return w != 0; });
 
   // Detection, one camera per iteration; errors are recorded per camera (STYLE.md rule 11).
   std::vector<std::vector<TagDetection>> found(static_cast<size_t>(n_cams));
@@ -189,8 +199,8 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
                     std::to_string(cam.width) + "x" + std::to_string(cam.height);
         continue;
       }
-      s.full_frame = full;
-      s.rois = full ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
+      s.full_frame = whole[static_cast<size_t>(c)] != 0;
+      s.rois = s.full_frame ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
       for (const cv::Rect& r : s.rois) s.pixels += r.area();
       found[static_cast<size_t>(c)] = m.detectors[static_cast<size_t>(c)].detect(img, s.rois);
       s.detections = static_cast<int>(found[static_cast<size_t>(c)].size());
@@ -277,10 +287,11 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
     props.push_back(j);
   }
   nlohmann::json failures = nlohmann::json::array();
-  int rois = 0;
+  int rois = 0, whole = 0;
   long long pixels = 0;
   for (const CameraSearch& s : f.search) {
     rois += static_cast<int>(s.rois.size());
+    whole += s.full_frame ? 1 : 0;
     pixels += s.pixels;
     if (!s.failure.empty()) failures.push_back({{"camera", s.camera}, {"reason", s.failure}});
   }
@@ -289,6 +300,7 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
           {"props", props},
           {"unknown_tags", f.unknown_tags},
           {"full_frame", f.full_frame},
+          {"whole_frame_cameras", whole},
           {"rois", rois},
           {"searched_pixels", pixels},
           {"camera_failures", failures},

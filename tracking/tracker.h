@@ -29,7 +29,8 @@ struct TrackerOptions {
   FilterOptions filter;
   bool filter_enabled = true;
   bool roi = true;                  // search only predicted regions once a prop is tracked
-  int full_frame_every = 30;        // and the full frame every N frames (0 = only on loss)
+  int full_frame_every = 30;        // and each camera's whole frame every N frames, staggered over
+                                    // the cameras (0 = only on loss)
   double roi_margin_px = 24;        // around the projected tags of the predicted pose...
   double roi_margin_fraction = 0.3; // ...plus this fraction of the projected size
   double max_sigma_position_m = 0.05;  // a solve less certain than this is not a track
@@ -39,7 +40,7 @@ struct TrackerOptions {
 
 struct CameraSearch {
   std::string camera;
-  bool full_frame = false;
+  bool full_frame = false;          // this camera searched its whole frame
   std::vector<cv::Rect> rois;
   long long pixels = 0;             // searched
   int detections = 0;               // tags decoded (any id)

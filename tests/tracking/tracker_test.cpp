@@ -65,6 +65,55 @@ TEST(PropTracker, RoiSearchFindsTheSameTagsAsFullFrames) {
   EXPECT_GE(same, static_cast<int>(std::ceil(0.99 * frames)));
 }
 
+// The periodic whole-frame search is staggered over the cameras: each camera searches its whole
+// frame every full_frame_every frames, never all of them on the same frame (which cost a 66 ms
+// frame every 30 in the live loop: 8 whole 1280x720 frames at once).
+TEST(PropTracker, StaggersThePeriodicWholeFrameSearchOverCameras) {
+  test::StudioFixture fx(std::filesystem::path(PREVIZ_TEST_TMP) / "tracking_stage_cache");
+  const double t = 3.0;
+  const Pose T = fx.studio.T_world_prop(t);
+  const synth::Scene scene = fx.studio.sceneAt(t, synth::kLayersPlate);
+  std::vector<cv::Mat> images(static_cast<size_t>(fx.cameras()));
+  test::parallelFor(fx.cameras(), [&](int c) { images[static_cast<size_t>(c)] = fx.renderWith(c, scene, T, 0); });
+  TrackerOptions o;
+  o.threads = 2;
+  o.full_frame_every = 3;  // fewer than the cameras: some frames hold two whole-frame searches
+  const int n = fx.cameras(), every = o.full_frame_every;
+  ASSERT_GT(n, every);
+  PropTracker tracker(fx.rig.cameras, test::studioProps(fx.studio), o);
+  std::vector<std::vector<int>> whole_at(static_cast<size_t>(n));  // frames each camera searched whole
+  constexpr int kFrames = 13;
+  for (int f = 0; f < kFrames; ++f) {
+    const TrackFrame r = tracker.track(f, f / kFps, images);
+    ASSERT_TRUE(r.props[0].tracked) << "frame " << f;
+    EXPECT_LT(translationDistance(r.props[0].T_world_prop, T), 0.002) << "frame " << f;
+    int whole = 0;
+    for (int c = 0; c < n; ++c) {
+      const CameraSearch& s = r.search[static_cast<size_t>(c)];
+      if (!s.full_frame) continue;
+      ++whole;
+      ASSERT_EQ(s.rois.size(), 1u);
+      EXPECT_EQ(s.pixels, static_cast<long long>(images[static_cast<size_t>(c)].total()));
+      whole_at[static_cast<size_t>(c)].push_back(f);
+    }
+    EXPECT_EQ(trackFrameToJson(r)["whole_frame_cameras"], whole);
+    if (f == 0) {
+      EXPECT_TRUE(r.full_frame);  // first frame: every camera
+      EXPECT_EQ(whole, n);
+    } else {
+      EXPECT_FALSE(r.full_frame) << "frame " << f;
+      EXPECT_LE(whole, (n + every - 1) / every) << "frame " << f;
+    }
+  }
+  for (int c = 0; c < n; ++c) {
+    const std::vector<int>& at = whole_at[static_cast<size_t>(c)];
+    ASSERT_GE(at.size(), 4u) << "camera " << c;  // frame 0, then every 3 frames of 12
+    EXPECT_EQ(at[0], 0);
+    EXPECT_LE(at[1], every) << "camera " << c;
+    for (size_t i = 2; i < at.size(); ++i) EXPECT_EQ(at[i] - at[i - 1], every) << "camera " << c;
+  }
+}
+
 TEST(PropTracker, DisappearingPropIsLostWithoutAPoseThenReacquired) {
   test::StudioFixture fx(std::filesystem::path(PREVIZ_TEST_TMP) / "tracking_stage_cache");
   const double t = 3.0;

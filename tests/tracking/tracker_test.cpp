@@ -72,9 +72,7 @@ TEST(PropTracker, StaggersThePeriodicWholeFrameSearchOverCameras) {
   test::StudioFixture fx(std::filesystem::path(PREVIZ_TEST_TMP) / "tracking_stage_cache");
   const double t = 3.0;
   const Pose T = fx.studio.T_world_prop(t);
-  const synth::Scene scene = fx.studio.sceneAt(t, synth::kLayersPlate);
-  std::vector<cv::Mat> images(static_cast<size_t>(fx.cameras()));
-  test::parallelFor(fx.cameras(), [&](int c) { images[static_cast<size_t>(c)] = fx.renderWith(c, scene, T, 0); });
+  const std::vector<cv::Mat> images = fx.renderTake(t, 0);  // the same frame every time
   TrackerOptions o;
   o.threads = 2;
   o.full_frame_every = 3;  // fewer than the cameras: some frames hold two whole-frame searches

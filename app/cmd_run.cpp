@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <map>
@@ -330,6 +331,7 @@ struct BenchArgs {
   std::string take, out = "out/bench_run";
   int frames = 3;
   int repeats = 5;
+  double fps = 0.5;  // default studio: frames 2 s apart over the choreography
   LoopArgs loop;
   bool json = false;
 };
@@ -342,11 +344,17 @@ double median(std::vector<double> v) {
 int runBench(const BenchArgs& a) {
   fs::path take_dir = a.take;
   if (take_dir.empty()) {
-    // The default studio: 8 witnesses 1280x720 + main 1920x1080, rendered once and kept.
-    take_dir = fs::path(a.out) / "take";
+    // The default studio: 8 witnesses 1280x720 + main 1920x1080, rendered once and kept (one
+    // folder per --fps).
+    if (!(a.fps > 0) || !std::isfinite(a.fps))
+      throw Error("bench run: --fps must be a finite value > 0 (got " + std::to_string(a.fps) + ")",
+                  fieldContext("--fps"));
+    char folder[64];
+    std::snprintf(folder, sizeof folder, "take_%gfps", a.fps);
+    take_dir = fs::path(a.out) / (a.fps == 0.5 ? std::string("take") : std::string(folder));
     synth::SynthOptions so;
     so.frames = a.frames;
-    so.fps = 0.5;  // frames 2 s apart over the choreography (behind the pillar at 2 s)
+    so.fps = a.fps;  // 0.5: frames 2 s apart over the choreography (behind the pillar at 2 s)
     so.write_meshes = false;
     bool have = false;
     if (fs::exists(take_dir / "take.json")) {
@@ -424,7 +432,7 @@ int runBench(const BenchArgs& a) {
   if (prop_frames > 0 && prop_full_frames == prop_frames)
     std::fprintf(stderr, "bench run: props searched every camera's whole frame on every frame (these frames are further "
                  "apart than the tracker's filter bridges); at camera rate it searches predicted regions: "
-                 "build/bench/bench_tracking, track_roi\n");
+                 "bench run --fps 24\n");
   std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
                "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
                median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));
@@ -477,6 +485,10 @@ Runner addBenchCommand(CLI::App& app) {
   cmd->add_option("--out", a->out, "Where the default take is kept")->capture_default_str();
   cmd->add_option("--frames", a->frames, "Frames measured")->capture_default_str();
   cmd->add_option("--repeats", a->repeats, "Runs over the frames (medians reported)")->capture_default_str();
+  cmd->add_option("--fps", a->fps,
+                  "Default studio: frame rate it is rendered at (0.5: frames 2 s apart over the choreography; "
+                  "24: consecutive frames at camera rate, the props stage on predicted regions)")
+      ->capture_default_str();
   addLoopOptions(cmd, a->loop, false);
   cmd->add_flag("--json", a->json, "JSON on stdout (always written; kept for uniformity)");
   return [a]() { return runBench(*a); };

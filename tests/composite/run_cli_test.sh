@@ -98,6 +98,7 @@ then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
 # Failures that name the culprit.
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet
 expect_fail "frames outside the take name the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 7:9 --quiet
+expect_fail "bench run: a bad --fps names the flag" "--fps" "$bin" bench run --out "$tmp/bench_out" --fps 0
 cp -r "$take" "$tmp/take_nocg"; rm "$tmp/take_nocg/cg/depth/000001.exr"
 expect_fail "missing CG depth names the file and frame" "cg/depth/000001.exr.*frame 1|frame 1.*cg/depth/000001.exr" \
   "$bin" run --take "$tmp/take_nocg" --out "$tmp/o" --voxel 0.02 --quiet

@@ -135,6 +135,34 @@ TEST(HullDepth, OrdersActorAgainstPlanesLikeTheExactHull) {
   }
 }
 
+// The live loop carves at 1 cm (app/frame_loop.h kLiveVoxelM): its main-view depth must still be
+// the exact hull of the masks, the rays finding the crossing below the cell size. Measured: 99 %
+// of pixels within 0.07 mm of the exact hull (0.02 mm at 5 mm); the 10 cm in-front ordering
+// 98.41 % against the exact hull's 98.37 % (1 cm misses a few hull slivers thinner than its
+// 5 mm samples, which lie in front of the actor).
+TEST(HullDepth, OneCentimetreCellsStillGiveTheExactHullDepth) {
+  const StudioFrame& f = frame();
+  HullOptions o = hullOptions();
+  o.voxel_m = 0.01;
+  Carver carver(f.witnesses, o);
+  Silhouettes s;
+  s.masks = f.masks;
+  const cv::Mat depth = carver.depth(carver.carve(s), f.main, f.main_raster.mask);
+  const DepthErrors e = compareDepth(depth, fullReferenceDepth(), f.main_raster.mask);
+  printErrors("1 cm cells: depth vs exact hull", e);
+  EXPECT_EQ(e.only_ours + e.only_ref, 0);
+  EXPECT_LE(e.p(0.99), 0.0005);
+  const cv::Mat& truth = f.main_raster.depth;
+  for (const double d : {0.05, 0.10, 0.20}) {
+    EXPECT_NEAR(orderedFraction(depth, truth, d, true), orderedFraction(fullReferenceDepth(), truth, d, true),
+                0.003)
+        << "d = " << d;
+    EXPECT_NEAR(orderedFraction(depth, truth, d, false), orderedFraction(fullReferenceDepth(), truth, d, false),
+                0.002)
+        << "d = " << d;
+  }
+}
+
 // Item 3: one witness dropped (no frame), one with a corrupt silhouette (the half of the actor
 // left of its silhouette's centre blacked out).
 struct DegradedInput {

@@ -39,10 +39,10 @@ namespace previz::app {
 // The live loop carves at 1 cm, not the library's 5 mm. Its only use of the hull is the main
 // camera's depth, and each ray finds the exact hull of the silhouettes below the cell size
 // whatever that is (t = 4 s, main at 960x540: 99 % of pixels within 0.07 mm of the exact hull at
-// 1 cm, 0.02 mm at 5 mm; tests/carving/depth_test.cpp measures 5 mm), while the carve is 3x
-// faster (bench_carving, 2 threads: 25 -> 8 ms). What 1 cm loses is hull slivers under ~5 mm
-// thick, which only ever stand in front of the actor. Meshes for post come from previz carve at
-// 5 mm (or run --voxel 0.005 --meshes).
+// 1 cm, 0.02 mm at 5 mm; asserted in tests/carving/depth_test.cpp), while the carve is 3x faster
+// (bench_carving, 2 threads: 25 -> 8 ms). What 1 cm loses is hull slivers under ~5 mm thick,
+// which only ever stand in front of the actor. Meshes for post come from previz carve at 5 mm
+// (or run --voxel 0.005 --meshes).
 constexpr double kLiveVoxelM = 0.01;
 inline carving::HullOptions liveHullOptions() {
   carving::HullOptions o;

@@ -58,10 +58,12 @@ struct FrameLoop::Impl {
       throw Error("key: expected " + std::to_string(n) + " witness plates (got " +
                   std::to_string(s.witness_plates.size()) + ")");
     std::vector<std::string> errors(n + 1);
-    // One item per camera (main last, the largest: dynamic scheduling). No exception leaves
-    // the region (STYLE.md rule 11).
+    // One item per camera, dynamic scheduling, the largest first: the main camera (index n; 2x
+    // a witness's pixels, soft alpha and despill), so that the witnesses fill in around it. No
+    // exception leaves the region (STYLE.md rule 11).
 #pragma omp parallel for schedule(dynamic) num_threads(threads())
-    for (int i = 0; i <= n; ++i) {
+    for (int item = 0; item <= n; ++item) {
+      const int i = n - item;
       try {
         if (i < n) {
           if (!s.dropped[i].empty()) continue;

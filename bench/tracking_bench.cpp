@@ -196,14 +196,15 @@ int main(int argc, char** argv) {
     std::printf("{\"stage\":\"%s\",\"size\":\"%s\",\"ms\":%.4f,\"ms_min\":%.4f,\"cpu_ms\":%.4f,\"threads\":%d", r.stage.c_str(),
                 r.size.c_str(), median(r.ms), *std::min_element(r.ms.begin(), r.ms.end()), median(r.cpu_ms), r.threads);
     if (r.budget_ms > 0) std::printf(",\"budget_ms\":%.1f", r.budget_ms);
-    if (r.stage.rfind("track_", 0) == 0) {
+    const bool tracker_case = r.stage.rfind("track_", 0) == 0;
+    if (tracker_case) {
       // The worst frame and the mean: the periodic whole-frame searches are the spikes.
       double sum = 0;
       for (double m : r.ms) sum += m;
       std::printf(",\"ms_max\":%.4f,\"ms_mean\":%.4f", *std::max_element(r.ms.begin(), r.ms.end()),
                   sum / static_cast<double>(r.ms.size()));
     }
-    if (r.stage != "track_full_frame" && full_ms.count(r.threads) && r.stage.rfind("track_", 0) == 0)
+    if (tracker_case && r.stage != "track_full_frame" && full_ms.count(r.threads))
       std::printf(",\"speedup_vs_full_frame\":%.2f", full_ms[r.threads] / std::max(1e-9, median(r.ms)));
     if (r.stage == "track_roi" && compared > 0)
       std::printf(",\"same_tags_frames\":%d,\"frames\":%d,\"same_tags_fraction\":%.4f", same, compared,

@@ -23,12 +23,6 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 
 int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
-// IEC 61966-2-1 encode (the decode table is core/srgb.h's).
-double srgbEncode(double l) {
-  l = std::clamp(l, 0.0, 1.0);
-  return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
-}
-
 // Linear [0, 1] in 65536 steps -> 8-bit sRGB code, rounded as the renderer rounds. The step
 // (1.5e-5 linear) is below a tenth of a code everywhere, darks included.
 constexpr int kEncodeSize = 65536;

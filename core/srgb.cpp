@@ -5,14 +5,12 @@
 namespace previz {
 namespace {
 
-double decode(double e) { return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4); }
-
 // Decision levels: level[i] = linear value of code i + 0.5, i = 0..254; level[255] = +inf pads
 // the search to 256 entries.
 const std::array<double, 256>& decisionLevels() {
   static const std::array<double, 256> levels = [] {
     std::array<double, 256> t{};
-    for (int i = 0; i < 255; ++i) t[i] = decode((i + 0.5) / 255.0);
+    for (int i = 0; i < 255; ++i) t[i] = srgbDecode((i + 0.5) / 255.0);
     t[255] = HUGE_VAL;
     return t;
   }();
@@ -21,10 +19,22 @@ const std::array<double, 256>& decisionLevels() {
 
 }  // namespace
 
+double srgbEncode(double linear) {
+  if (!(linear > 0)) return 0;
+  if (linear >= 1) return 1;
+  return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+}
+
+double srgbDecode(double encoded) {
+  if (!(encoded > 0)) return 0;
+  if (encoded >= 1) return 1;
+  return encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4);
+}
+
 const std::array<float, 256>& srgb8ToLinear() {
   static const std::array<float, 256> table = [] {
     std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) t[i] = static_cast<float>(decode(i / 255.0));
+    for (int i = 0; i < 256; ++i) t[i] = static_cast<float>(srgbDecode(i / 255.0));
     return t;
   }();
   return table;

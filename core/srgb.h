@@ -1,11 +1,16 @@
 #pragma once
-// The sRGB transfer function (IEC 61966-2-1) on 8-bit codes, for the per-pixel loops that key,
-// despill, refine and composite camera plates in linear light: a decode table, and an encode
-// that gives exactly lround(255 * encode(linear)) without a pow() per pixel.
+// The sRGB transfer function (IEC 61966-2-1): the curve itself, and on 8-bit codes, for the
+// per-pixel loops that render, key, despill, refine and composite camera plates in linear light,
+// a decode table and an encode that gives exactly lround(255 * encode(linear)) without a pow()
+// per pixel.
 #include <array>
 #include <cstdint>
 
 namespace previz {
+
+// The transfer function, [0, 1] -> [0, 1], clamped (NaN -> 0).
+double srgbEncode(double linear);
+double srgbDecode(double encoded);
 
 // Code value 0..255 -> linear light in [0, 1].
 const std::array<float, 256>& srgb8ToLinear();

@@ -410,18 +410,6 @@ std::vector<Eigen::Vector2d> samplePattern(int samples_per_pixel) {
   return pattern;
 }
 
-double srgbEncode(double linear) {
-  if (!(linear > 0)) return 0;
-  if (linear >= 1) return 1;
-  return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
-}
-
-double srgbDecode(double encoded) {
-  if (!(encoded > 0)) return 0;
-  if (encoded >= 1) return 1;
-  return encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4);
-}
-
 bool pixelRay(const Camera& camera, const Eigen::Vector2d& px, Eigen::Vector3d& dir_cam) {
   const Lens lens(camera);
   double xd, yd, x, y;

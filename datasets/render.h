@@ -18,6 +18,7 @@
 
 #include "core/camera.h"
 #include "core/pose.h"
+#include "core/srgb.h"
 #include "datasets/scene.h"
 
 namespace previz::synth {
@@ -75,9 +76,9 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
 LinearView renderLinear(const Camera& camera, const std::vector<ShutterSample>& shutter,
                         const ShutterSample& centre, int samples_per_pixel, int threads = 0);
 
-// sRGB transfer function (IEC 61966-2-1), [0, 1] -> [0, 1], clamped.
-double srgbEncode(double linear);
-double srgbDecode(double encoded);
+// sRGB transfer function (IEC 61966-2-1), [0, 1] -> [0, 1], clamped: core/srgb.h's.
+using previz::srgbDecode;
+using previz::srgbEncode;
 
 // Pixel-centre ray in the camera frame (unit, z > 0); false past the lens' fold. Exposed so
 // truth and tests trace exactly the rays the renderer traces.

@@ -23,7 +23,7 @@ struct TrackArgs {
   double fps = 0;
   float decimate = 1.0f, sigma = 0.8f;
   int detector_threads = 1, threads = 0, full_every = 30;
-  bool no_refine = false, no_filter = false, no_roi = false, not_srgb = false;
+  bool no_refine = false, no_refine_corners = false, no_filter = false, no_roi = false, not_srgb = false;
   std::vector<std::string> per_camera;
   bool json = false, quiet = false;
 };
@@ -59,12 +59,13 @@ void parseFrames(const std::string& text, tracking::TrackRunOptions& o) {
   }
 }
 
-// "witness01:decimate=2,sigma=0.8,threads=1,refine-edges=0"
+// "witness01:decimate=2,sigma=0.8,threads=1,refine-edges=0,refine-corners=1"
 void parsePerCamera(const std::string& text, const tracking::DetectorOptions& base,
                     std::map<std::string, tracking::DetectorOptions>& out) {
   const auto colon = text.find(':');
   if (colon == std::string::npos || colon == 0)
-    throw Error("expected CAMERA:key=value,... (keys decimate, sigma, threads, refine-edges), got '" + text + "'",
+    throw Error("expected CAMERA:key=value,... (keys decimate, sigma, threads, refine-edges, refine-corners), got '" +
+                    text + "'",
                 fieldContext("--detector"));
   tracking::DetectorOptions d = base;
   for (const std::string& kv : splitList(text.substr(colon + 1))) {
@@ -77,7 +78,9 @@ void parsePerCamera(const std::string& text, const tracking::DetectorOptions& ba
     else if (key == "sigma") d.sigma = static_cast<float>(value);
     else if (key == "threads") d.threads = static_cast<int>(value);
     else if (key == "refine-edges") d.refine_edges = value != 0;
-    else throw Error("unknown key '" + key + "' (decimate, sigma, threads, refine-edges)", fieldContext("--detector"));
+    else if (key == "refine-corners") d.refine_corners = value != 0;
+    else throw Error("unknown key '" + key + "' (decimate, sigma, threads, refine-edges, refine-corners)",
+                     fieldContext("--detector"));
   }
   out[text.substr(0, colon)] = d;
 }
@@ -136,6 +139,7 @@ int runTrack(const TrackArgs& a) {
   o.tracker.detector.sigma = a.sigma;
   o.tracker.detector.threads = a.detector_threads;
   o.tracker.detector.refine_edges = !a.no_refine;
+  o.tracker.detector.refine_corners = !a.no_refine_corners;
   o.tracker.detector.linear_light = !a.not_srgb;
   for (const std::string& pc : a.per_camera) parsePerCamera(pc, o.tracker.detector, o.tracker.per_camera);
   o.tracker.threads = a.threads;
@@ -325,12 +329,17 @@ Runner addTrackCommand(CLI::App& app) {
   cmd->add_flag("--frame-files", a->frame_files,
                 "Track every frame on its own into OUT/frames/%06d.json (kept when already there); no poses.jsonl");
   cmd->add_option("--decimate", a->decimate, "libapriltag quad_decimate")->capture_default_str();
-  cmd->add_option("--sigma", a->sigma, "libapriltag quad_sigma (blur before the quad search)")->capture_default_str();
+  cmd->add_option("--sigma", a->sigma,
+                  "libapriltag quad_sigma: blur before the quad search, for sensor noise (at decimate 1 the tags are "
+                  "also decoded on the blurred image: 0 for clean footage, where 0.8 loses small tags)")
+      ->capture_default_str();
   cmd->add_option("--detector-threads", a->detector_threads, "libapriltag threads per camera")->capture_default_str();
-  cmd->add_flag("--no-refine-edges", a->no_refine, "Do not refine tag edges on the image gradient");
-  cmd->add_flag("--not-srgb", a->not_srgb, "8-bit images are linear, not sRGB-encoded (detect on them as they are)");
+  cmd->add_flag("--no-refine-edges", a->no_refine, "Do not refine tag edges on the image gradient (libapriltag)");
+  cmd->add_flag("--no-refine-corners", a->no_refine_corners,
+                "Keep libapriltag's corners (no fit of each tag's edges on linear light)");
+  cmd->add_flag("--not-srgb", a->not_srgb, "8-bit images are linear, not sRGB-encoded (corners refined on them as they are)");
   cmd->add_option("--detector", a->per_camera,
-                  "Per-camera detector CAM:decimate=2,sigma=0.8,threads=1,refine-edges=1 (repeatable)");
+                  "Per-camera detector CAM:decimate=2,sigma=0.8,threads=1,refine-edges=1,refine-corners=1 (repeatable)");
   cmd->add_option("--threads", a->threads, "OpenMP threads over cameras (0 = all cores)")->capture_default_str();
   cmd->add_option("--full-every", a->full_every,
                   "Each camera searches its whole frame every N frames, staggered over the cameras (0 = only on loss)")
@@ -366,7 +375,7 @@ Runner addTrackCommand(CLI::App& app) {
   cam->add_option("--frames", c->frames, "Frames A:B, A:, :B or A");
   cam->add_option("--fps", c->fps, "Frame rate (default: take.json's, else 24)");
   cam->add_option("--decimate", c->decimate, "libapriltag quad_decimate")->capture_default_str();
-  cam->add_option("--sigma", c->sigma, "libapriltag quad_sigma")->capture_default_str();
+  cam->add_option("--sigma", c->sigma, "libapriltag quad_sigma (0 for clean footage)")->capture_default_str();
   cam->add_flag("--no-filter", c->no_filter, "Report the per-frame solve unfiltered");
   cam->add_flag("--not-srgb", c->not_srgb, "8-bit images are linear, not sRGB-encoded");
   cam->add_flag("--json", c->json, "Print a JSON summary on stdout");

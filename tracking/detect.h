@@ -17,18 +17,29 @@ struct DetectorOptions {
   std::vector<std::string> families = {"tag36h11"};
   float decimate = 1.0f;       // libapriltag quad_decimate (>= 1): 2 halves the resolution of the
                                // quad search (4x faster) and loses tags under ~40 px
-  // quad_sigma: Gaussian blur of the image the quads are searched in (decoding and edge refinement
-  // use the sharp image). 0.8 by default: on a camera with 2 grey levels of noise the unblurred
-  // search segments the noise itself and is ~7x slower for the same tags.
+  // quad_sigma: Gaussian blur of the image the quads are searched in. At decimate 1 libapriltag
+  // 3.3 blurs the one image it also decodes and refines the edges on (in place: the detector
+  // hands it a copy); at decimate > 1 those use the sharp image. 0.8 by default: on a camera with
+  // 2 grey levels of noise the unblurred search segments the noise itself and is ~7x slower for
+  // the same tags.
   float sigma = 0.8f;
   int threads = 1;             // libapriltag worker threads per call (the tracker runs cameras in parallel)
   bool refine_edges = true;    // fit each edge to the image gradient (sub-pixel corners)
   double decode_sharpening = 0.25;
-  // 8-bit input is sRGB-encoded (the studio renderer and most video cameras): the tag is searched
-  // on the decoded, linear image (8-bit LUT). On the encoded values a black/white edge's profile is
-  // asymmetric and libapriltag's edges sit ~0.2 px inside the black border: a 40 px tag looks 1 %
-  // small, which is 1 % of the distance for a camera tracked from one plane of studio tags
-  // (calib's DetectOptions::linear_light, same reason). Set false for linear cameras.
+  // Each corner refined from the tag's two edges through it (core/marker_edges.h: the centroid
+  // of each edge's dark -> light step, lines through them, their intersection) on a float,
+  // linear-light patch around the tag. libapriltag's own corners come from the 8-bit values,
+  // where a black/white edge's profile is asymmetric (sRGB): they sit ~0.2 px inside the black
+  // border, and a 40 px tag looks 1 % small, which is 1 % of the distance for a camera tracked
+  // from one plane of studio tags. A corner whose edges cannot be measured (too short, at the
+  // image's border, no quiet zone) keeps libapriltag's. Families with a reversed border
+  // (tagStandard41h12, tagCircle*) keep libapriltag's corners.
+  bool refine_corners = true;
+  // 8-bit input is sRGB-encoded (the studio renderer and most video cameras): the corner
+  // refinement decodes it to linear light. The tags are searched and decoded on the 8-bit values
+  // as they are: an 8-bit linear image has too few levels in the shadows (on the real outdoor
+  // photos of tests/tracking/detect_real_test.cpp it lost 37 of 47 tags). Set false for linear
+  // cameras.
   bool linear_light = true;
   int max_hamming = 1;         // bit errors accepted when decoding (the family table holds up to 2)
   float min_decision_margin = 20.0f;  // reject weaker decodes (false positives in noise)
@@ -58,7 +69,8 @@ class TagDetector {
   // Full image; 'image' is 8-bit grey or BGR (converted here).
   std::vector<TagDetection> detect(const cv::Mat& image);
   // Only inside the given rectangles (each searched on its own; a tag found in two overlapping
-  // rectangles is returned once). Only the pixels inside a rectangle are converted to grey.
+  // rectangles is returned once, two tags of the same id both). Only the pixels inside a
+  // rectangle are converted to grey.
   std::vector<TagDetection> detect(const cv::Mat& image, const std::vector<Roi>& rois);
 
   const DetectorOptions& options() const;

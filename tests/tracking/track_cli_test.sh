@@ -56,6 +56,15 @@ expect_fail "bad --shard names the flag" "--shard" \
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o4" --shard 2/2 --quiet
 expect_fail "--freed needs --udp" "--udp" \
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o5" --freed --quiet
+expect_fail "an unknown --detector key names the flag and the keys" "--detector.*refine-corners" \
+  "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --out "$tmp/o7" --detector witness01:blur=1 --quiet
+# libapriltag's own corners on one camera, previz's on the other: still tracked.
+if out=$("$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --cameras witness01,witness02 \
+         --detector witness01:refine-corners=0 --out "$tmp/o8" --json --quiet 2>"$tmp/err"); then
+  grep -q '"tracked":2' <<<"$out" && ok "--detector CAM:refine-corners=0 tracks" || fail "refine-corners=0: $out"
+else
+  fail "--detector CAM:refine-corners=0: $(cat "$tmp/err")"
+fi
 expect_fail "missing --props" "--props" "$bin" track --take "$T" --rig "$T/truth/rig.json" --out "$tmp/o6" --quiet
 expect_fail "unknown camera" "nosuch" \
   "$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --cameras nosuch --out "$tmp/o7" --quiet

@@ -13,6 +13,7 @@
 #include "core/io.h"
 #include "datasets/studio.h"
 #include "tests/calib/solve_fixtures.h"
+#include "tests/real_data.h"
 
 namespace previz::calib {
 namespace {
@@ -332,12 +333,7 @@ TEST(Intrinsics, RealChessboardAgreesWithOpenCv) {
   std::sort(files.begin(), files.end());
   ASSERT_EQ(files.size(), 13u) << "expected 13 images " << (dir / "left*.jpg").string();
 
-  BoardSpec board;
-  board.type = BoardType::kChessboard;
-  board.rows = 7;  // squares: 6 x 9 inner corners
-  board.cols = 10;
-  board.square_m = 1.0;
-  board.margin_m = 0.5;
+  const BoardSpec board = previz::test::opencvSampleBoard();
   std::vector<ViewObservations> views;
   for (const auto& f : files) {
     const cv::Mat image = readImage(f, cv::IMREAD_GRAYSCALE);

@@ -24,22 +24,13 @@
 #include "core/board.h"
 #include "core/io.h"
 #include "multicam/rig_calib.h"
+#include "tests/real_data.h"
 
 namespace previz::multicam {
 namespace {
 
 namespace fs = std::filesystem;
 const fs::path kDir = fs::path(PREVIZ_SHARED_DATA) / "opencv-chessboard";
-
-BoardSpec sampleBoard() {
-  BoardSpec board;
-  board.type = BoardType::kChessboard;
-  board.rows = 7;  // squares: 6 x 9 inner corners
-  board.cols = 10;
-  board.square_m = 1.0;
-  board.margin_m = 0.5;
-  return board;
-}
 
 // Image number -> detections, for "left" or "right".
 std::map<int, calib::ViewObservations> detectSide(const std::string& side, const BoardSpec& board) {
@@ -62,7 +53,7 @@ cv::Mat distCoeffs(const Camera& c) {
 }
 
 TEST(RigCalibReal, StereoPairAgreesWithOpenCvStereoCalibrate) {
-  const BoardSpec board = sampleBoard();
+  const BoardSpec board = previz::test::opencvSampleBoard();
   std::map<std::string, std::map<int, calib::ViewObservations>> sides;
   for (const char* side : {"left", "right"}) sides[side] = detectSide(side, board);
   ASSERT_EQ(sides["left"].size(), 13u) << "real data missing: " << kDir.string() << " (../shared/data, see its README)";

@@ -14,6 +14,7 @@
 #include "calib/detail/detect_common.h"
 #include "calib/focus.h"
 #include "core/error.h"
+#include "core/srgb.h"
 
 namespace previz::calib {
 
@@ -45,18 +46,6 @@ void DetectOptions::validate() const {
 }
 
 namespace detail {
-
-const float* srgbToLinearTable() {
-  static const auto table = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[i] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
-  return table.data();
-}
 
 DetectInput::DetectInput(const cv::Mat& image, const DetectOptions& options,
                          const std::string& source)
@@ -91,7 +80,7 @@ DetectInput::DetectInput(const cv::Mat& image, const DetectOptions& options,
 const cv::Mat& DetectInput::linearImage() const {
   if (linear_.empty()) {
     if (options_.linear_light) {
-      const float* lut = srgbToLinearTable();
+      const float* lut = srgb8ToLinear().data();
       linear_.create(grey_.size(), CV_32F);
       for (int v = 0; v < grey_.rows; ++v) {
         const std::uint8_t* in = grey_.ptr<std::uint8_t>(v);

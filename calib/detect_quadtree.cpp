@@ -10,7 +10,6 @@
 #include <map>
 #include <string>
 
-#include <Eigen/Eigenvalues>
 #include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
 
@@ -142,7 +141,7 @@ void detectQuadtree(const DetectInput& input, const BoardSpec& board, ViewObserv
       ec.along[1] = (f.board[(q + 3) % 4] - f.board[q]) / m.edge_m;
       ec.px_per_unit = px_per_m;
       ec.edge_px = f.edge_px;
-      ec.profile_half_px.fill(std::min(bit_m, gap_m) * px_per_m);
+      ec.profile_half_px = std::min(bit_m, gap_m) * px_per_m;
       edge_corners.push_back(ec);
     }
   }

@@ -8,6 +8,7 @@
 
 #include "calib/detail/detect_common.h"
 #include "core/error.h"
+#include "core/srgb.h"
 
 namespace previz::calib {
 
@@ -53,7 +54,7 @@ FocusMeasure measureFocus(const cv::Mat& image, const std::vector<Observation>& 
   mask.col(0).setTo(0);
   mask.col(grey.cols - 1).setTo(0);
 
-  const float* lut = detail::srgbToLinearTable();
+  const float* lut = srgb8ToLinear().data();
   auto lin = [&](std::uint8_t v) { return linear_light ? lut[v] : v / 255.0f; };
 
   FocusMeasure f;

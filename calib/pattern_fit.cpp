@@ -9,6 +9,7 @@
 #include <Eigen/SVD>
 
 #include "calib/detail/detect_common.h"
+#include "core/srgb.h"
 
 namespace previz::calib::detail {
 
@@ -331,7 +332,7 @@ PatternFit fitLocalPattern(const cv::Mat& grey, const Eigen::Matrix3d& H_px_boar
   // this many pixels.
   const Eigen::JacobiSVD<Eigen::Matrix2d> svd(jacobianH(H_px_board, Eigen::Vector2d::Zero()));
   const double px_per_m = svd.singularValues()(1);
-  const float* lut = srgbToLinearTable();
+  const float* lut = srgb8ToLinear().data();
   // Line bends: for each family, the image direction u of its lines at the point, the normal m,
   // and the curvature kappa (px^-1): with t the board offset along the line,
   // m.(q(t) - q(0)) = lambda t + K t^2 through the two neighbours, kappa = K / (px per m)^2.

@@ -74,12 +74,12 @@ bool intersectLines(const Eigen::Vector3d& l0, const Eigen::Vector3d& l1, Eigen:
 
 bool refineCornerByEdges(const cv::Mat& lin, const MarkerCorner& e, Eigen::Vector2d& out) {
   auto H = [&](const Eigen::Vector2d& b) { return Eigen::Vector2d((e.H * b.homogeneous()).hnormalized()); };
-  const double t0_px = 3.0, t1_px = std::min(e.reach_fraction * e.edge_px, e.reach_px);
+  const double t0_px = 3.0, t1_px = std::min(0.45 * e.edge_px, 16.0);
   if (t1_px - t0_px < 1.5) return false;
+  const double R = std::clamp(0.9 * e.profile_half_px, 1.5, 4.0);
   std::array<Eigen::Vector3d, 2> lines;
   for (int side = 0; side < 2; ++side) {
     const Eigen::Vector2d u = e.along[side], outward = -e.along[1 - side];
-    const double R = std::clamp(0.9 * e.profile_half_px[side], 1.5, 4.0);
     std::vector<Eigen::Vector2d> points;
     for (double t = t0_px; t <= t1_px + 1e-9; t += 1.0) {
       const Eigen::Vector2d b = e.corner + (t / e.px_per_unit) * u;
@@ -102,14 +102,13 @@ bool fitEdgeLine(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vect
   const Eigen::Vector2d u = ab / length;
   Eigen::Vector2d n(-u.y(), u.x());
   if (n.dot(light_side) < 0) n = -n;
-  const double R = reach_px;
   const int count = static_cast<int>(std::floor(length - 2 * margin_px)) + 1;  // one a pixel
   const double spacing = (length - 2 * margin_px) / std::max(count - 1, 1);
   std::vector<Eigen::Vector2d> points;
   for (int k = 0; k < count; ++k) {
     const Eigen::Vector2d p = a + (margin_px + k * spacing) * u;
     double c = 0;
-    if (stepOffset(lin, p, n, R, c)) points.push_back(p + c * n);
+    if (stepOffset(lin, p, n, reach_px, c)) points.push_back(p + c * n);
   }
   if (static_cast<int>(points.size()) < std::max(2, count / 2)) return false;
   return fitLine(points, line);

@@ -26,13 +26,7 @@ struct MarkerCorner {
   std::array<Eigen::Vector2d, 2> along;   // unit vectors (marker plane) of its two edges, into the marker
   double px_per_unit = 0;                 // image pixels per marker-plane unit near the corner
   double edge_px = 0;                     // the marker's shortest edge in the image
-  // Clear distance either side of each edge (along[0]'s, along[1]'s), across it in the image: the
-  // border bit or the quiet zone beyond it, whichever is narrower. The profile is read over
-  // 0.9 of it, at least 1.5 px and at most 4 px.
-  std::array<double, 2> profile_half_px{0, 0};
-  // How far along each edge from the corner it is measured: from 3 px up to min(reach_fraction x
-  // edge_px, reach_px).
-  double reach_fraction = 0.45, reach_px = 16.0;
+  double profile_half_px = 0;             // clear distance either side of the edge (border bit, gap)
 };
 
 // Bilinear sample of a CV_32FC1 image at pixel (x, y) (OpenCV's convention: (0, 0) is the centre of

@@ -114,28 +114,31 @@ struct TagDetector::Impl {
       cv::cvtColor(image(box), grey8, cv::COLOR_BGR2GRAY);
     else
       grey8 = image(box);
-    const float* lut = srgb8ToLinear().data();
-    patch.create(box.size(), CV_32F);
-    for (int v = 0; v < box.height; ++v) {
-      const std::uint8_t* in = grey8.ptr<std::uint8_t>(v);
-      float* out = patch.ptr<float>(v);
-      for (int u = 0; u < box.width; ++u) out[u] = options.linear_light ? lut[in[u]] : in[u] / 255.0f;
+    if (options.linear_light) {
+      const float* lut = srgb8ToLinear().data();
+      patch.create(box.size(), CV_32F);
+      for (int v = 0; v < box.height; ++v) {
+        const std::uint8_t* in = grey8.ptr<std::uint8_t>(v);
+        float* out = patch.ptr<float>(v);
+        for (int u = 0; u < box.width; ++u) out[u] = lut[in[u]];
+      }
+    } else {
+      grey8.convertTo(patch, CV_32F, 1.0 / 255.0);
     }
     // The tag's plane: a unit square, corner q at kSquare[q] (libapriltag's order: its p[0..3]
     // go around the tag, so any assignment that goes around it is a homography of the same quad).
     // Only used to measure the border bit across each edge in the image.
     static const Eigen::Vector2d kSquare[4] = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
+    static const cv::Point2f kSquareCv[4] = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
     const Eigen::Vector2d box_tl(box.x, box.y);
     std::array<Eigen::Vector2d, 4> current;
     for (int q = 0; q < 4; ++q) current[q] = start[q] - box_tl;
     for (int pass = 0; pass < kRefinePasses; ++pass) {
-      cv::Point2f from[4], to[4];
-      for (int q = 0; q < 4; ++q) {
-        from[q] = cv::Point2f(static_cast<float>(kSquare[q].x()), static_cast<float>(kSquare[q].y()));
+      cv::Point2f to[4];
+      for (int q = 0; q < 4; ++q)
         to[q] = cv::Point2f(static_cast<float>(current[q].x()), static_cast<float>(current[q].y()));
-      }
       cv::Mat Hcv;
-      cv::getPerspectiveTransform(from, to).convertTo(Hcv, CV_64F);
+      cv::getPerspectiveTransform(kSquareCv, to).convertTo(Hcv, CV_64F);
       Eigen::Matrix3d H;
       for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c) H(r, c) = Hcv.at<double>(r, c);

@@ -34,9 +34,6 @@ class DetectInput {
   DetectOptions options_;
 };
 
-// sRGB code value (0..255) -> linear light in [0, 1].
-const float* srgbToLinearTable();
-
 // True when the pixel lies closer than margin to the image border (pixel-centre convention:
 // the image spans [-0.5, size - 0.5]).
 bool nearBorder(const Eigen::Vector2d& px, cv::Size size, double margin);

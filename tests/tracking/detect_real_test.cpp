@@ -230,7 +230,7 @@ DetectorOptions cleanFootage() {
 // libapriltag's quad a little elsewhere (up to 0.6 px measured with refine_corners off); the edge
 // refinement brings most corners back together: 41 of the 45 tags agree to 0.1 px (measured),
 // the rest are tags of 18-20 px on a side whose border is about a pixel thick, where a corner
-// keeps libapriltag's (at most 2.03 px apart, measured). A rectangle may find a tag the whole
+// keeps libapriltag's (at most 1.76 px apart, measured). A rectangle may find a tag the whole
 // photo misses (measured: one, 8 px wide, seen edge-on).
 TEST(TagDetectorReal, RectanglesAroundEachTagFindWhatTheWholePhotoFinds) {
   LOAD_PHOTOS(photos);

@@ -373,8 +373,10 @@ void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
   }
 }
 
+// Plain (no member initialisers): edgeAlpha's candidate arrays are filled before they are read,
+// and zeroing them on every call cost about a fifth of its time (measured).
 struct Rgb {
-  float b = 0, g = 0, r = 0;
+  float b, g, r;
 };
 
 // Two-colour alpha of pixel (x, y) from its window: B = local background, F = the foreground
@@ -390,36 +392,46 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     const std::uint8_t* p = img.ptr<std::uint8_t>(yy) + 3 * xx;
     return Rgb{lut[p[0]], lut[p[1]], lut[p[2]]};
   };
-  auto add = [](Rgb& sum, const Rgb& v) {
-    sum.b += v.b;
-    sum.g += v.g;
-    sum.r += v.r;
-  };
   constexpr int kMaxCandidates = 49;  // (2 * 3 + 1)^2
-  Rgb sum_screen, sum_garbage, sum_plate;
+  // The window's sums per class, accumulated in scan order in locals (kept in registers: a sum
+  // picked by reference per pixel went through memory, measured ~15 % of the keyer's time).
+  float ssb = 0, ssg = 0, ssr = 0, sgb = 0, sgg = 0, sgr = 0, spb = 0, spg = 0, spr = 0;
   int n_screen = 0, n_garbage = 0;
   std::array<Rgb, kMaxCandidates> fg, unknown;
   int n_fg = 0, n_unknown = 0;
   for (int yy = y0; yy <= y1; ++yy) {
     const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
+    const std::uint8_t* row = bgr8.ptr<std::uint8_t>(yy);
+    const std::uint8_t* plate_row = use_plate ? sm.plate.ptr<std::uint8_t>(yy) : nullptr;
     for (int xx = x0; xx <= x1; ++xx) {
-      switch (c[xx]) {
-        case kScreen:
-        case kGarbage:
-          if (xx == x && yy == y) break;  // a background pixel being refined is not its own B
-          add(c[xx] == kScreen ? sum_screen : sum_garbage, colour(bgr8, xx, yy));
-          ++(c[xx] == kScreen ? n_screen : n_garbage);
-          if (use_plate) add(sum_plate, colour(sm.plate, xx, yy));
-          break;
-        case kUnknown: unknown[n_unknown++] = colour(bgr8, xx, yy); break;
-        default: fg[n_fg++] = colour(bgr8, xx, yy); break;
+      const std::uint8_t k = c[xx];
+      const std::uint8_t* p = row + 3 * xx;
+      const float b = lut[p[0]], g = lut[p[1]], r = lut[p[2]];
+      if (k == kScreen || k == kGarbage) {
+        if (xx == x && yy == y) continue;  // a background pixel being refined is not its own B
+        if (k == kScreen) {
+          ssb += b, ssg += g, ssr += r;
+          ++n_screen;
+        } else {
+          sgb += b, sgg += g, sgr += r;
+          ++n_garbage;
+        }
+        if (use_plate) {
+          const std::uint8_t* q = plate_row + 3 * xx;
+          spb += lut[q[0]], spg += lut[q[1]], spr += lut[q[2]];
+        }
+      } else if (k == kUnknown) {
+        unknown[n_unknown++] = Rgb{b, g, r};
+      } else {
+        fg[n_fg++] = Rgb{b, g, r};
       }
     }
   }
+  const Rgb sum_screen{ssb, ssg, ssr}, sum_garbage{sgb, sgg, sgr}, sum_plate{spb, spg, spr};
   const int n_bg = n_screen + n_garbage;
   if (n_bg == 0) return -1.0f;
   const Rgb c = colour(bgr8, x, y);
-  Rgb bg;
+  Rgb bg{};
   if (use_plate) {
     // The plate's own colour here, darkened by the neighbours' shadow factor.
     const float shadow = (sum_screen.b + sum_screen.g + sum_screen.r + sum_garbage.b +

@@ -288,8 +288,11 @@ int runCamera(const CameraArgs& a) {
     std::cerr << "; vs truth: median " << s.median_position_error_mm << " mm " << s.median_rotation_error_deg
               << " deg, max " << s.max_position_error_mm << " mm " << s.max_rotation_error_deg << " deg";
   std::cerr << " -> " << s.poses.string() << "\n";
+  if (!s.bad_frames.empty())
+    std::cerr << "track camera: " << s.bad_frames.size() << " bad frame(s) skipped (first: frame "
+              << s.bad_frames.front() << "; file and reason in " << s.poses.string() << ")\n";
   nlohmann::json j = {{"command", "track camera"}, {"camera", a.camera}, {"frames", s.frames},
-                      {"solved", s.solved},        {"poses", s.poses.string()},
+                      {"solved", s.solved},        {"bad_frames", s.bad_frames}, {"poses", s.poses.string()},
                       {"median_sigma_position_mm", s.median_sigma_position_mm}, {"ms", s.ms}};
   if (s.truth_frames)
     j["truth"] = {{"frames", s.truth_frames},

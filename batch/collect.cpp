@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
+#include "core/pose_lines.h"
 #include "core/rig.h"
 
 namespace previz::batch {
@@ -117,25 +118,13 @@ std::vector<std::pair<int, Pose>> mainCameraPoses(const Manifest& m, const TakeP
   if (take.main_camera.empty()) return poses;
   const Rig rig = readRig(m.rig);
   const Pose rig_pose = rig.at(take.main_camera).T_world_cam;
+  // Frames the tracker lost (or could not read) have no pose and no key; frames the file does
+  // not list keep the rig's.
   std::map<int, Pose> moving;
-  if (!take.main_poses.empty()) {
-    std::ifstream in(take.main_poses);
-    if (!in) throw Error("cannot open main poses", fileContext(take.main_poses));
-    int number = 0;
-    for (std::string line; std::getline(in, line);) {
-      ++number;
-      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-      try {
-        const nlohmann::json j = nlohmann::json::parse(line);
-        moving[j.at("frame").get<int>()] = poseFromJson(j.at("T_world_cam"), "T_world_cam");
-      } catch (const std::exception& e) {
-        ErrorContext c = fileContext(take.main_poses);
-        c.field = "line " + std::to_string(number);
-        throw Error(std::string("bad main pose line: ") + e.what(), c);
-      }
-    }
-  }
+  std::map<int, std::string> lost;
+  if (!take.main_poses.empty()) moving = readPoseLines(take.main_poses, "T_world_cam", &lost);
   for (int f : take.frames) {
+    if (lost.count(f)) continue;
     const auto it = moving.find(f);
     poses.push_back({f, it != moving.end() ? it->second : rig_pose});
   }

@@ -35,7 +35,8 @@ struct CollectSummary {
 CollectSummary collectBatch(const Manifest& manifest, const CollectOptions& options);
 
 // The take's main-camera pose per frame: from its main poses file where it has the frame, else
-// the rig's pose. Throws Error naming the file and line.
+// the rig's pose; frames the file marks lost or bad (`previz track camera`) are left out.
+// Throws Error naming the file and line.
 std::vector<std::pair<int, Pose>> mainCameraPoses(const Manifest& manifest, const TakePlan& take);
 
 // A sequence's file name: "actor.0012.obj" for ("actor", 12, "obj").

@@ -14,6 +14,7 @@
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/pose_lines.h"
 
 namespace previz::carving {
 namespace fs = std::filesystem;
@@ -67,29 +68,6 @@ size_t rowFieldCount(const fs::path& path) {
     return tok.size();
   }
   return 0;
-}
-
-std::map<int, Pose> readMainPoses(const fs::path& path) {
-  std::map<int, Pose> poses;
-  std::istringstream in(readTextFile(path));
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    try {
-      const nlohmann::json j = nlohmann::json::parse(line);
-      poses[j.at("frame").get<int>()] = poseFromJson(j.at("T_world_cam"), "T_world_cam");
-    } catch (const Error& e) {
-      throw Error("line " + std::to_string(line_no) + ": " + e.message(),
-                  context(path, e.context().field));
-    } catch (const std::exception& e) {
-      throw Error("line " + std::to_string(line_no) + ": expected {\"frame\", \"T_world_cam\"}: " +
-                      e.what(),
-                  context(path, "frame"));
-    }
-  }
-  return poses;
 }
 
 }  // namespace
@@ -181,7 +159,7 @@ Take::Take(const TakeSource& source) : source_(source) {
                   context(source_.main_poses, "--main-poses"));
     if (!fs::is_regular_file(source_.main_poses, ec))
       throw Error("main camera poses file not found", context(source_.main_poses, "--main-poses"));
-    main_poses_ = readMainPoses(source_.main_poses);
+    main_poses_ = readPoseLines(source_.main_poses, "T_world_cam", &main_lost_);
   }
 }
 
@@ -252,11 +230,23 @@ CameraFrame readCameraFile(const RigCamera& rc, int frame, const fs::path& path,
 
 CameraFrame Take::read(const std::string& camera, int frame) const {
   const RigCamera& rc = rig_.at(camera);
+  if (CameraFrame lost = unposed(camera, frame); !lost.ok()) return lost;
   return hasMasks() ? readCameraFile(rc, frame, maskPath(camera, frame), true)
                     : readCameraFile(rc, frame, framePath(camera, frame), false);
 }
 
+CameraFrame Take::unposed(const std::string& camera, int frame) const {
+  CameraFrame out;
+  out.camera = camera;
+  out.frame = frame;
+  const auto it = camera == main_name_ ? main_lost_.find(frame) : main_lost_.end();
+  if (it != main_lost_.end())
+    out.dropped = "no pose at this frame in " + source_.main_poses.string() + " (" + it->second + ")";
+  return out;
+}
+
 CameraFrame Take::readPlate(const std::string& camera, int frame) const {
+  if (CameraFrame lost = unposed(camera, frame); !lost.ok()) return lost;
   return readCameraFile(rig_.at(camera), frame, framePath(camera, frame), false);
 }
 

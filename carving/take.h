@@ -25,8 +25,9 @@ struct TakeSource {
   std::filesystem::path rig_path;
   std::filesystem::path masks_dir;   // optional: <masks_dir>/<cam>/%06d.png
   // Optional JSON lines {"frame": f, "T_world_cam": {"R", "t"}} for the main camera when it
-  // moves (the format of a synthetic take's truth/main_poses.jsonl); frames not listed keep
-  // the rig's pose.
+  // moves (the format of a synthetic take's truth/main_poses.jsonl and of `previz track
+  // camera`'s camera_poses.jsonl); frames not listed keep the rig's pose, frames it marks lost or
+  // bad drop the main camera for that frame (read() says why).
   std::filesystem::path main_poses;
 };
 
@@ -50,7 +51,7 @@ class Take {
   // "rig.json", "projection rows" or "K R t rows".
   const std::string& rigFormat() const { return rig_format_; }
   bool hasMasks() const { return !source_.masks_dir.empty(); }
-  bool hasMainPoses() const { return !main_poses_.empty(); }
+  bool hasMainPoses() const { return !source_.main_poses.empty(); }
 
   // Frame numbers of the take, ascending: every frame any rig camera has a file for (plate, or
   // mask with masks), and 0 .. frames-1 from take.json when it has them.
@@ -80,11 +81,15 @@ class Take {
   RigCamera cameraAt(const std::string& camera, int frame) const;
 
  private:
+  // Not ok() for the main camera at a frame its poses file marks lost or bad.
+  CameraFrame unposed(const std::string& camera, int frame) const;
+
   TakeSource source_;
   Rig rig_;
   std::string rig_format_;
   std::vector<int> frames_;
   std::map<int, Pose> main_poses_;
+  std::map<int, std::string> main_lost_;  // frame -> why the poses file has no pose there
   std::map<std::string, double> gains_;
   std::string main_name_;
 };

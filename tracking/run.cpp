@@ -49,31 +49,6 @@ double takeFps(const fs::path& take, double given) {
   return 24.0;
 }
 
-// Every non-empty line of a JSON lines file, parsed and checked to be an object with an integer
-// "frame" and 'key', handed to 'line' with a context naming the file and line. A malformed line,
-// or an Error thrown by 'line', is an Error naming them ('expected' says what a line holds).
-void forEachFrameLine(const fs::path& path, const std::string& key, const std::string& expected,
-                      const std::function<void(const nlohmann::json&, const ErrorContext&)>& line_fn) {
-  std::istringstream in(readTextFile(path));
-  int line_no = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++line_no;
-    if (line.empty()) continue;
-    ErrorContext c;
-    c.file = path.string();
-    c.field = "line " + std::to_string(line_no);
-    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
-    if (j.is_discarded() || !j.is_object() || !j.contains("frame") || !j["frame"].is_number_integer() ||
-        !j.contains(key))
-      throw Error("expected " + expected, c);
-    try {
-      line_fn(j, c);
-    } catch (const Error& e) {
-      throw Error(e.message(), c);
-    }
-  }
-}
-
 std::vector<int> selectFrames(const std::vector<int>& all, const TrackRunOptions& o) {
   std::vector<int> out;
   for (int f : all)
@@ -126,15 +101,6 @@ std::vector<int> takeFrames(const fs::path& take, const std::vector<std::string>
   return frames;
 }
 
-std::map<int, Pose> readPoseLines(const fs::path& path, const std::string& key) {
-  std::map<int, Pose> out;
-  forEachFrameLine(path, key, "{\"frame\": integer, \"" + key + "\": {\"R\", \"t\"}}",
-                   [&](const nlohmann::json& j, const ErrorContext&) {
-                     out[j["frame"].get<int>()] = poseFromJson(j[key], key);
-                   });
-  return out;
-}
-
 std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
   std::map<int, std::map<int, Pose>> out;
   const std::string expected = "{\"frame\", \"props\": [{\"id\", \"T_world_prop\"}]}";
@@ -162,9 +128,10 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     for (const std::string& name : in.cameras) cams.push_back(rig.at(name));
   }
   std::map<int, Pose> moving;
+  std::map<int, std::string> moving_lost;
   int moving_index = -1;
   if (!in.main_poses.empty()) {
-    moving = readPoseLines(in.main_poses);
+    moving = readPoseLines(in.main_poses, "T_world_cam", &moving_lost);
     for (size_t c = 0; c < cams.size(); ++c)
       if (cams[c].camera.name == in.moving_camera) moving_index = static_cast<int>(c);
   }
@@ -227,14 +194,22 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
       images[static_cast<size_t>(c)] = cv::imread(p.string(), cv::IMREAD_COLOR);
       if (images[static_cast<size_t>(c)].empty()) failures[static_cast<size_t>(c)] = "not an image: " + p.string();
     }
+    // The moving camera where its poses file has it; where the file marks it lost (or its frame
+    // bad) it has no pose and sits the frame out; frames the file does not list, the rig's pose.
+    if (moving_index >= 0) {
+      const size_t m = static_cast<size_t>(moving_index);
+      const auto it = moving.find(f);
+      const auto lost = moving_lost.find(f);
+      tracker.setCameraPose(moving_index, it != moving.end() ? it->second : cams[m].T_world_cam);
+      if (lost != moving_lost.end() && failures[m].empty()) {
+        images[m].release();
+        failures[m] = "no pose at this frame in " + in.main_poses.string() + " (" + lost->second + ")";
+      }
+    }
     for (int c = 0; c < n_cams; ++c)
       if (!failures[static_cast<size_t>(c)].empty())
         s.camera_failures.push_back("camera '" + cams[static_cast<size_t>(c)].camera.name + "': frame " +
                                     std::to_string(f) + ": " + failures[static_cast<size_t>(c)]);
-    if (moving_index >= 0) {
-      const auto it = moving.find(f);
-      if (it != moving.end()) tracker.setCameraPose(moving_index, it->second);
-    }
     const auto t_track = std::chrono::steady_clock::now();
     const TrackFrame r = tracker.track(f, f / fps, images);
     s.track_ms += msSince(t_track);
@@ -341,7 +316,28 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
   bool live = false;
   for (size_t i = 0; i < frames.size(); ++i) {
     const int f = frames[i];
-    const cv::Mat img = readImage(framePath(in.take, in.camera, f), cv::IMREAD_COLOR);
+    // A frame that cannot be read, or is not the rig camera's size, is reported and skipped: the
+    // take goes on, and the pose after it starts afresh (no filter across the gap).
+    const std::filesystem::path file = framePath(in.take, in.camera, f);
+    cv::Mat img;
+    std::string bad;
+    try {
+      img = readImage(file, cv::IMREAD_COLOR);
+      if (img.cols != rc.camera.width || img.rows != rc.camera.height)
+        bad = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", the rig's camera is " +
+              std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height);
+    } catch (const Error& e) {
+      bad = e.what();
+    }
+    if (!bad.empty()) {
+      live = false;
+      ++s.frames;
+      s.bad_frames.push_back(f);
+      lines += nlohmann::json{{"frame", f}, {"time_s", f / fps}, {"camera", in.camera}, {"state", "bad frame"},
+                              {"file", file.string()}, {"reason", bad}}.dump() + "\n";
+      if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
+      continue;
+    }
     std::vector<TagObservation> obs;
     int unknown = 0;
     for (const TagDetection& det : detector.detect(img)) {

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/pose_lines.h"
 #include "core/rig.h"
 #include "tracking/props.h"
 #include "tracking/stream.h"
@@ -75,8 +76,6 @@ struct TrackRunSummary {
 
 // The frames of a take: every %06d.png under cams/<camera>/ for the given cameras, ascending.
 std::vector<int> takeFrames(const std::filesystem::path& take, const std::vector<std::string>& cameras);
-// JSON lines {"frame", "T_world_cam"} -> frame -> pose; throws Error naming the file and line.
-std::map<int, Pose> readPoseLines(const std::filesystem::path& path, const std::string& key = "T_world_cam");
 // JSON lines {"frame", "props": [{"id", "T_world_prop"}]} (a synthetic take's truth/props.jsonl)
 // -> frame -> prop id -> pose; throws Error naming the file and line.
 std::map<int, std::map<int, Pose>> readPropTruth(const std::filesystem::path& path);
@@ -94,6 +93,7 @@ struct CameraTrackInput {
 };
 struct CameraTrackSummary {
   int frames = 0, solved = 0;
+  std::vector<int> bad_frames;       // unreadable or not the rig camera's size: skipped, reported
   double median_sigma_position_mm = 0;
   int truth_frames = 0;
   double median_position_error_mm = 0, max_position_error_mm = 0;

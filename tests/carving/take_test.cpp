@@ -168,6 +168,32 @@ TEST(Take, MainPosesOverrideTheRigPerFrame) {
   EXPECT_LT(translationDistance(take.cameraAt("w1", 1).T_world_cam, rig.at("w1").T_world_cam), 1e-12);
 }
 
+TEST(Take, AMainPoseTheTrackerLostDropsTheMainCameraForThatFrame) {
+  // `previz track camera`'s camera_poses.jsonl: frame 0 tracked, 1 lost, 2 a bad frame.
+  const Rig rig = smallRig();
+  const fs::path dir = makeTake("lost_poses", rig);
+  const Pose moved = lookAt(Eigen::Vector3d(-2.5, -1, 1.6), Eigen::Vector3d(0, 0, 1));
+  writeFileAtomic(dir / "camera_poses.jsonl",
+                  nlohmann::json({{"frame", 0}, {"state", "tracked"}, {"T_world_cam", poseToJson(moved)}}).dump() +
+                      "\n" +
+                      nlohmann::json({{"frame", 1}, {"state", "lost"}, {"reason", "no studio tag seen"}}).dump() +
+                      "\n" + nlohmann::json({{"frame", 2}, {"state", "bad frame"}, {"reason", "truncated"}}).dump() +
+                      "\n");
+  const Take take({dir, dir / "rig.json", {}, dir / "camera_poses.jsonl"});
+  EXPECT_TRUE(take.hasMainPoses());
+  EXPECT_LT(translationDistance(take.cameraAt("main", 0).T_world_cam, moved), 1e-12);
+  EXPECT_TRUE(take.read("main", 0).ok());
+  for (int f : {1, 2}) {
+    for (const CameraFrame& c : {take.read("main", f), take.readPlate("main", f)}) {
+      EXPECT_FALSE(c.ok());
+      EXPECT_NE(c.dropped.find("no pose at this frame in"), std::string::npos) << c.dropped;
+      EXPECT_NE(c.dropped.find("camera_poses.jsonl"), std::string::npos) << c.dropped;
+      EXPECT_NE(c.dropped.find(f == 1 ? "no studio tag seen" : "truncated"), std::string::npos) << c.dropped;
+    }
+    EXPECT_TRUE(take.read("w1", f).ok());
+  }
+}
+
 // Expects an Error whose context names 'field' or 'file'.
 template <typename Fn>
 void expectErrorNaming(Fn&& fn, const std::string& field, const std::string& file) {

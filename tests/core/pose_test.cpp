@@ -10,6 +10,9 @@
 
 #include "core/camera.h"
 #include "core/error.h"
+#include "core/io.h"
+#include "core/pose_lines.h"
+#include "scratch.h"
 
 namespace previz {
 namespace {
@@ -106,6 +109,36 @@ TEST(Pose, JsonErrorsNameTheField) {
   j["R"] = {{-1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // a reflection
   EXPECT_EQ(field_of(j), "T_world_cam.R");
   EXPECT_EQ(field_of(nlohmann::json::array()), "T_world_cam");
+}
+
+TEST(PoseLines, TrackedLinesGivePosesLostAndBadFramesNone) {
+  const auto dir = test::scratchDir("core", "pose_lines");
+  const Pose T = lookAt(Eigen::Vector3d(1, 2, 3), Eigen::Vector3d::Zero());
+  const std::string lines = nlohmann::json({{"frame", 4}, {"T_world_cam", poseToJson(T)}}).dump() + "\n  \n" +
+                            nlohmann::json({{"frame", 5}, {"state", "tracked"}, {"T_world_cam", poseToJson(T)}}).dump() +
+                            "\n" + nlohmann::json({{"frame", 6}, {"state", "lost"}, {"reason", "no tag"}}).dump() + "\n" +
+                            nlohmann::json({{"frame", 7}, {"state", "bad frame"}}).dump() + "\n";
+  writeFileAtomic(dir / "poses.jsonl", lines);
+  std::map<int, std::string> unposed;
+  const auto poses = readPoseLines(dir / "poses.jsonl", "T_world_cam", &unposed);
+  ASSERT_EQ(poses.size(), 2u);
+  EXPECT_LT(translationDistance(poses.at(4), T), 1e-15);
+  EXPECT_LT(rotationDistance(poses.at(5), T), 1e-12);
+  ASSERT_EQ(unposed.size(), 2u);
+  EXPECT_EQ(unposed.at(6), "no tag");
+  EXPECT_EQ(unposed.at(7), "state \"bad frame\"");
+  // A line without state must have the pose; a broken line is named.
+  for (const std::string& bad : {std::string("{\"frame\": 1}"), std::string("{\"frame\": 1, \"T_world_cam\": 3}"),
+                                 std::string("{\"frame\": \"x\"}"), std::string("{\"frame\": 1, ")}) {
+    writeFileAtomic(dir / "bad.jsonl", lines + bad + "\n");
+    try {
+      readPoseLines(dir / "bad.jsonl");
+      ADD_FAILURE() << "no error for " << bad;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().field, "line 6") << e.what();
+      EXPECT_NE(e.context().file.find("bad.jsonl"), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

@@ -28,6 +28,19 @@ else
   fail "track runs: $(cat "$tmp/err")"
 fi
 
+# A main camera pose the camera tracker lost (camera_poses.jsonl's "lost" line): the main camera
+# sits that frame out, named with the reason; the witnesses still track the crate.
+{ head -n 1 "$T/truth/main_poses.jsonl"; echo '{"frame":1,"camera":"main","state":"lost","reason":"no studio tag seen"}'; } > "$tmp/lost_poses.jsonl"
+if out=$("$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --main-poses "$tmp/lost_poses.jsonl" \
+         --out "$tmp/out_lost" --json --quiet 2>"$tmp/err"); then
+  grep -q '"tracked":2' <<<"$out" && ok "lost main pose: crate still tracked" || fail "lost main pose: $out"
+  grep -q "camera 'main': frame 1: no pose at this frame in .*lost_poses.jsonl (no studio tag seen)" <<<"$out" \
+    && ok "lost main pose named" || fail "lost main pose not reported: $out"
+  grep -q "camera 'main': frame 0" <<<"$out" && fail "frame 0's main pose was there: $out" || ok "frame 0 uses its pose"
+else
+  fail "track with a lost main pose: $(cat "$tmp/err")"
+fi
+
 # track prop: the studio crate by generator, then tracked with it.
 if "$bin" track prop --shape box --name crate --size 0.3,0.3,0.3 --tag-size 0.12 --out "$tmp/props.json" \
      --sheets "$tmp/sheets" --json >/dev/null 2>"$tmp/err"; then

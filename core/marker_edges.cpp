@@ -12,6 +12,8 @@ namespace previz {
 namespace {
 
 constexpr double kStep = 0.25;  // px between profile samples across the edge
+constexpr double kMaxReachPx = 4.0;  // both callers clamp their reach to it
+constexpr int kMaxSamples = static_cast<int>(2 * kMaxReachPx / kStep) + 1;
 
 // Where the dark -> light step across the edge lies, along the unit normal n from p (the light
 // side towards +n): the centroid of the differences over [c - R, c + R], re-centred 3 times,
@@ -19,16 +21,16 @@ constexpr double kStep = 0.25;  // px between profile samples across the edge
 // step). keep_negative 0 keeps only the positive differences: robust to a neighbour's edge close
 // by, but biased towards the light side under noise, which is stronger there in linear light
 // (sRGB codes' noise grows with the decode's slope), and only its positive half is summed.
-// False when the profile leaves the image, has no step, or the step is beyond R.
+// False when R > kMaxReachPx, the profile leaves the image, has no step, or the step is beyond R.
 bool stepOffset(const cv::Mat& lin, const Eigen::Vector2d& p, const Eigen::Vector2d& n, double R,
                 double keep_negative, double& offset) {
-  constexpr int kMaxSamples = 64;
+  if (!(R <= kMaxReachPx)) return false;
   double c = 0;
   for (int it = 0; it < 3; ++it) {
     double g[kMaxSamples], at[kMaxSamples], g_max = 0;
     int count = 0;
     float prev = bilinearAt(lin, p.x() + (c - R) * n.x(), p.y() + (c - R) * n.y());
-    for (double d = c - R + kStep; d <= c + R + 1e-9 && count < kMaxSamples; d += kStep) {
+    for (double d = c - R + kStep; d <= c + R + 1e-9; d += kStep) {
       const float v = bilinearAt(lin, p.x() + d * n.x(), p.y() + d * n.y());
       if (!std::isfinite(v) || !std::isfinite(prev)) return false;
       g[count] = static_cast<double>(v - prev);

@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <functional>
 #include <regex>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>

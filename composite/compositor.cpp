@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -36,10 +37,34 @@ const std::vector<std::uint8_t>& encodeTable() {
   return table;
 }
 
+// Clamped without branches (min/max; the CG's values are random to the branch predictor), NaN
+// to 0 (an EXR may hold NaN: it used to index the table at INT_MIN).
 inline std::uint8_t encode(const std::uint8_t* table, float linear) {
-  const float s = linear * float(kEncodeSize - 1) + 0.5f;
-  const int i = s <= 0.f ? 0 : (s >= float(kEncodeSize - 1) ? kEncodeSize - 1 : static_cast<int>(s));
-  return table[i];
+  float s = linear * float(kEncodeSize - 1) + 0.5f;
+  s = s > 0.f ? s : 0.f;
+  s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
+  return table[static_cast<int>(s)];
+}
+
+// Four floats as one vector (GCC/Clang vector extension: SSE on x86-64, NEON on ARM). A CG
+// pixel's R, G, B and the next pixel's R are loaded at once; lane 3 is never used.
+typedef float Float4 __attribute__((vector_size(16)));
+typedef std::int32_t Int4 __attribute__((vector_size(16)));
+inline Float4 load4(const float* p) {
+  Float4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// encode() of lanes R, G, B at once, written B, G, R.
+inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
+  Float4 s = rgb * float(kEncodeSize - 1) + 0.5f;
+  s = s > 0.f ? s : 0.f;
+  s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
+  const Int4 i = __builtin_convertvector(s, Int4);
+  bgr[0] = table[i[2]];
+  bgr[1] = table[i[1]];
+  bgr[2] = table[i[0]];
 }
 
 inline float smoothstep01(float t) {
@@ -127,8 +152,8 @@ void Compositor::build() {
       t.index = y0 * CW + x0;
       // Weights in 1/256, at most 255: a point on the far pixel's centre (the last column or
       // row) is read 1/256 px short of it.
-      t.wx = static_cast<std::uint8_t>(std::min(255, static_cast<int>((x - x0) * 256.f + 0.5f)));
-      t.wy = static_cast<std::uint8_t>(std::min(255, static_cast<int>((y - y0) * 256.f + 0.5f)));
+      t.ax = std::min(255, static_cast<int>((x - x0) * 256.f + 0.5f)) * (1.f / 256);
+      t.ay = std::min(255, static_cast<int>((y - y0) * 256.f + 0.5f)) * (1.f / 256);
     }
   }
   outside_cg_ = outside;
@@ -194,6 +219,27 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
   const float* cg_z = cg_depth.ptr<float>();
   const int dx1 = CW > 1 ? 1 : 0, dy1 = CH > 1 ? CW : 0;  // neighbour offsets (pixels)
 
+  // The 2 x 2 block of a tap read as four 4-float vectors, unless that would read past the CG's
+  // last float (a block whose bottom-right pixel is the CG's last pixel).
+  const long long vector_taps_below = static_cast<long long>(CW) * CH - 1 - dx1 - dy1;
+  // CG through the lens at a tap: bilinear colour in lanes R, G, B, the CG's gain applied.
+  auto cgColour = [&](const Tap& t) -> Float4 {
+    if (t.index < 0) return Float4{outside[2], outside[1], outside[0], 0.f};
+    const float ax = t.ax, ay = t.ay;
+    const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
+    const float* p01 = p00 + 3 * dx1;
+    const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
+    const float* p11 = p10 + 3 * dx1;
+    const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+    if (t.index < vector_taps_below) {
+      // The same products and sums, in the same order, as the scalar lines below.
+      return gain * (w00 * load4(p00) + w01 * load4(p01) + w10 * load4(p10) + w11 * load4(p11));
+    }
+    return Float4{gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]),
+                  gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]),
+                  gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]), 0.f};
+  };
+
   long long actor_px = 0, actor_front = 0, cg_front = 0, filled = 0, fallback = 0;
 #pragma omp parallel for schedule(static, 16) num_threads(threadCount(options_.threads)) \
     reduction(+ : actor_px, actor_front, cg_front, filled, fallback)
@@ -204,28 +250,14 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
     const float* za_row = in.actor_depth.ptr<float>(v);
     std::uint8_t* o = r.bgr.ptr<std::uint8_t>(v);
     for (int u = 0; u < W; ++u) {
-      // CG through the lens: bilinear colour, nearest depth (a blend of depths across the
-      // pillar's edge would be a depth that exists nowhere).
       const Tap t = tap_row[u];
-      float cb, cgc, cr, zc;
-      if (t.index < 0) {
-        cb = outside[0];
-        cgc = outside[1];
-        cr = outside[2];
-        zc = kInf;
-      } else {
-        const float ax = t.wx * (1.f / 256), ay = t.wy * (1.f / 256);
-        const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
-        const float* p01 = p00 + 3 * dx1;
-        const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
-        const float* p11 = p10 + 3 * dx1;
-        const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
-        cr = gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]);
-        cgc = gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]);
-        cb = gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]);
-        zc = cg_z[t.index + (t.wx >= 128 ? dx1 : 0) + (t.wy >= 128 ? dy1 : 0)];
+      if (!(al[u] > 0) && !debug_layers) {
+        encode3(enc, cgColour(t), o + 3 * u);  // no actor (most of the frame): the CG alone
+        continue;
       }
-
+      // CG depth through the lens: nearest (a blend of depths across the pillar's edge would be
+      // a depth that exists nowhere).
+      const float zc = t.index < 0 ? kInf : cg_z[t.index + (t.ax >= 0.5f ? dx1 : 0) + (t.ay >= 0.5f ? dy1 : 0)];
       const float alpha = std::clamp(al[u], 0.f, 1.f);
       float za = za_row[u];
       unsigned char code = kFrontNone;
@@ -283,6 +315,8 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
         o[3 * u + 2] = fp[2];
         continue;
       }
+      const Float4 c = cgColour(t);
+      const float cb = c[2], cgc = c[1], cr = c[0];
       const float ob = a * dec[fp[0]] + (1 - a) * cb;
       const float og = a * dec[fp[1]] + (1 - a) * cgc;
       const float orr = a * dec[fp[2]] + (1 - a) * cr;

@@ -119,10 +119,10 @@ class Compositor {
   DistortMapResult map_;
   int outside_cg_ = 0;
   // The map as the pass reads it, one entry per lens pixel: index of the top-left of the 2 x 2
-  // CG pixels it blends (-1 = outside the CG) and the blend weights in 1/256 (0.004 px steps).
+  // CG pixels it blends (-1 = outside the CG) and the blend weights, in steps of 1/256 (0.004 px).
   struct Tap {
     std::int32_t index = -1;
-    std::uint8_t wx = 0, wy = 0;
+    float ax = 0, ay = 0;
   };
   std::vector<Tap> taps_;
 };

@@ -176,6 +176,23 @@ TEST(Compositor, PlatePixelsPassUnresampledWhereTheActorIsInFront) {
   EXPECT_EQ(r.stats.fallback_px, 0);
 }
 
+// Where there is no actor the pass takes a short path (the CG alone, read four floats at a time
+// except at the CG's last pixel): it must give what the full path gives (debug layers on), and
+// out-of-range CG values, NaN included, clamp (NaN to black) instead of indexing anywhere.
+TEST(Compositor, CgAloneMatchesTheFullPathAndClampsBadCgValues) {
+  Flat f = flat(0.f, 2.0f, 3.0f);
+  cv::randu(f.in.cg_color, -0.2, 1.2);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  f.in.cg_color.at<cv::Vec3f>(0, 0) = cv::Vec3f(nan, 0.5f, nan);
+  f.in.cg_color(cv::Rect(62, 46, 2, 2)).setTo(cv::Scalar(2.0, -1.0, 0.25));  // the block the last pixel blends
+  const Compositor c(f.lens, f.cg, CompositeOptions{});
+  const CompositeResult fast = c.composite(f.in, false), full = c.composite(f.in, true);
+  EXPECT_EQ(cv::norm(fast.bgr, full.bgr, cv::NORM_INF), 0);
+  EXPECT_EQ(fast.stats.actor_px, 0);
+  EXPECT_EQ(fast.bgr.at<cv::Vec3b>(0, 0), cv::Vec3b(0, 188, 0));      // B G R: NaN -> 0
+  EXPECT_EQ(fast.bgr.at<cv::Vec3b>(47, 63), cv::Vec3b(137, 0, 255));  // 0.25 -> 137
+}
+
 TEST(Compositor, CgInFrontWhereNearerAndSoftWithinTheBand) {
   CompositeOptions o;
   o.depth_band_m = 0.04;

@@ -37,15 +37,6 @@ const std::vector<std::uint8_t>& encodeTable() {
   return table;
 }
 
-// Clamped without branches (min/max; the CG's values are random to the branch predictor), NaN
-// to 0 (an EXR may hold NaN: it used to index the table at INT_MIN).
-inline std::uint8_t encode(const std::uint8_t* table, float linear) {
-  float s = linear * float(kEncodeSize - 1) + 0.5f;
-  s = s > 0.f ? s : 0.f;
-  s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
-  return table[static_cast<int>(s)];
-}
-
 // Four floats as one vector (GCC/Clang vector extension: SSE on x86-64, NEON on ARM). A CG
 // pixel's R, G, B and the next pixel's R are loaded at once; lane 3 is never used.
 typedef float Float4 __attribute__((vector_size(16)));
@@ -56,7 +47,9 @@ inline Float4 load4(const float* p) {
   return v;
 }
 
-// encode() of lanes R, G, B at once, written B, G, R.
+// Linear R, G, B (lanes 0-2) -> the 8-bit codes, written B, G, R. Clamped without branches
+// (min/max; the CG's values are random to the branch predictor), NaN to 0 (an EXR may hold NaN:
+// it used to index the table at INT_MIN).
 inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
   Float4 s = rgb * float(kEncodeSize - 1) + 0.5f;
   s = s > 0.f ? s : 0.f;
@@ -320,9 +313,7 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
       const float ob = a * dec[fp[0]] + (1 - a) * cb;
       const float og = a * dec[fp[1]] + (1 - a) * cgc;
       const float orr = a * dec[fp[2]] + (1 - a) * cr;
-      o[3 * u + 0] = encode(enc, ob);
-      o[3 * u + 1] = encode(enc, og);
-      o[3 * u + 2] = encode(enc, orr);
+      encode3(enc, Float4{orr, og, ob, 0.f}, o + 3 * u);
       if (debug_layers) {
         r.layer_alpha.ptr<float>(v)[u] = a;
         r.layer_actor_depth.ptr<float>(v)[u] = alpha > 0 ? za : kInf;

@@ -332,6 +332,7 @@ struct BenchArgs {
   int frames = 3;
   int repeats = 5;
   double fps = 0.5;  // default studio: frames 2 s apart over the choreography
+  double noise = 2.0;  // default studio: sensor noise, grey levels (a camera's plate is never clean)
   LoopArgs loop;
   bool json = false;
 };
@@ -349,20 +350,36 @@ int runBench(const BenchArgs& a) {
     if (!(a.fps > 0) || !std::isfinite(a.fps))
       throw Error("bench run: --fps must be a finite value > 0 (got " + std::to_string(a.fps) + ")",
                   fieldContext("--fps"));
-    char folder[64];
-    std::snprintf(folder, sizeof folder, "take_%gfps", a.fps);
-    take_dir = fs::path(a.out) / (a.fps == 0.5 ? std::string("take") : std::string(folder));
+    if (!(a.noise >= 0) || !std::isfinite(a.noise))
+      throw Error("bench run: --noise must be a finite value >= 0 (got " + std::to_string(a.noise) + ")",
+                  fieldContext("--noise"));
+    // One folder per (--fps, --noise): take, take_24fps, take_noise0, take_24fps_noise0.
+    std::string folder = "take";
+    char part[64];
+    if (a.fps != 0.5) {
+      std::snprintf(part, sizeof part, "_%gfps", a.fps);
+      folder += part;
+    }
+    if (a.noise != 2.0) {
+      std::snprintf(part, sizeof part, "_noise%g", a.noise);
+      folder += part;
+    }
+    take_dir = fs::path(a.out) / folder;
     synth::SynthOptions so;
     so.frames = a.frames;
     so.fps = a.fps;  // 0.5: frames 2 s apart over the choreography (behind the pillar at 2 s)
+    so.noise_sigma = a.noise;
     so.write_meshes = false;
     bool have = false;
     if (fs::exists(take_dir / "take.json")) {
       const nlohmann::json t = readJsonFile(take_dir / "take.json");
-      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps;
+      const nlohmann::json options = t.value("options", nlohmann::json::object());
+      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps && options.is_object() &&
+             options.value("noise_sigma", -1.0) == so.noise_sigma;
     }
     if (!have) {
-      std::cerr << "bench run: rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080) into "
+      std::cerr << "bench run: rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080, noise "
+                << so.noise_sigma << " grey levels) into "
                 << take_dir << " (once)\n";
       synth::synthesizeTake(so, take_dir);
     }
@@ -441,6 +458,13 @@ int runBench(const BenchArgs& a) {
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()}};
+  // The plates' sensor noise, as the take records it (synthetic takes): the keyer's work grows with it.
+  if (fs::exists(take_dir / "take.json")) {
+    const nlohmann::json t = readJsonFile(take_dir / "take.json");
+    const nlohmann::json options = t.value("options", nlohmann::json::object());
+    if (options.is_object() && options.contains("noise_sigma") && options["noise_sigma"].is_number())
+      j["noise_sigma"] = options["noise_sigma"];
+  }
   // The props stage searches whole frames when the frames are further apart than its filter
   // bridges (the default take: 2 s) and predicted regions at camera rate.
   if (l.props)
@@ -488,6 +512,10 @@ Runner addBenchCommand(CLI::App& app) {
   cmd->add_option("--fps", a->fps,
                   "Default studio: frame rate it is rendered at (0.5: frames 2 s apart over the choreography; "
                   "24: consecutive frames at camera rate, the props stage on predicted regions)")
+      ->capture_default_str();
+  cmd->add_option("--noise", a->noise,
+                  "Default studio: sensor noise it is rendered with, grey levels (sigma; 0: noise-free plates, which "
+                  "the keyer decides almost everywhere on its fast path)")
       ->capture_default_str();
   addLoopOptions(cmd, a->loop, false);
   cmd->add_flag("--json", a->json, "JSON on stdout (always written; kept for uniformity)");

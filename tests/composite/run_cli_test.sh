@@ -84,7 +84,7 @@ for f in 000000 000001 000002; do cmp -s "$tmp/run/composite/$f.png" "$tmp/comp/
 python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['command']=='composite' and j['actor_px'] > 1000 and j['fallback_px'] < 0.01 * j['actor_px'], j" "$tmp/comp.json" \
   && ok "composite JSON" || fail "composite JSON"
 
-if "$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 > "$tmp/bench.json" 2> "$tmp/bench.err" && python3 - "$tmp/bench.json" <<'PY'
+if "$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 > "$tmp/bench.json" 2> "$tmp/bench.err" && python3 - "$tmp/bench.json" "$take/take.json" <<'PY'
 import json, sys
 j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
 assert j["stage"] == "run" and j["ms"] > 0 and j["fps"] > 0 and j["target_ms"] == 20, j
@@ -92,6 +92,7 @@ assert [s["stage"] for s in j["stages"]] == ["key", "carve", "depth", "props", "
 assert j["largest_stage"] in ("key", "carve", "depth", "props", "composite")
 assert [s["budget_ms"] for s in j["stages"] if s["stage"] == "props"] == [3], j
 assert 0 <= j["props_full_frame_fraction"] <= 1, j
+assert j["noise_sigma"] == json.load(open(sys.argv[2]))["options"]["noise_sigma"], j
 PY
 then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
 
@@ -99,6 +100,7 @@ then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet
 expect_fail "frames outside the take name the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 7:9 --quiet
 expect_fail "bench run: a bad --fps names the flag" "--fps" "$bin" bench run --out "$tmp/bench_out" --fps 0
+expect_fail "bench run: a bad --noise names the flag" "--noise" "$bin" bench run --out "$tmp/bench_out" --noise -1
 cp -r "$take" "$tmp/take_nocg"; rm "$tmp/take_nocg/cg/depth/000001.exr"
 expect_fail "missing CG depth names the file and frame" "cg/depth/000001.exr.*frame 1|frame 1.*cg/depth/000001.exr" \
   "$bin" run --take "$tmp/take_nocg" --out "$tmp/o" --voxel 0.02 --quiet

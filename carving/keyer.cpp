@@ -34,6 +34,14 @@ bool allBackground8(const std::uint8_t* p) {
   return (v & 0xFEFEFEFEFEFEFEFEull) == 0;
 }
 
+// True where some byte of the 8 at p is kUnknown.
+bool anyUnknown8(const std::uint8_t* p) {
+  std::uint64_t v;
+  std::memcpy(&v, p, 8);
+  v ^= 0x0101010101010101ull * kUnknown;  // bytes equal to kUnknown become 0
+  return ((v - 0x0101010101010101ull) & ~v & 0x8080808080808080ull) != 0;
+}
+
 // Screen chroma thresholds, as fractions of the screen's own q = (G - max(R, B)) / G.
 // A pixel within 15 % of the screen's q is screen (8-bit quantisation of a deep shadow moves q by
 // ~2 %; sensor noise of a few levels by ~5 %). At or below 40 % it is foreground: the studio's
@@ -373,6 +381,40 @@ void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
   }
 }
 
+// Lone unknown pixels of rows [y0, y1) (not the image's outer rows and columns): an unknown
+// pixel whose 8 neighbours are all background is sensor noise on the screen or the surroundings
+// (a pixel of foreground alone would be a speck, which the silhouette's cleaning removes), so it
+// becomes background (garbage when a neighbour is, else screen) and neither it nor its
+// neighbours are refined. A pixel turned here has no unknown neighbour, so no other pixel's test
+// reads it: bands run in parallel and the result does not depend on their order.
+// Returns the pixels turned.
+int dropLoneUnknown(cv::Mat& cls, int y0, int y1) {
+  const int W = cls.cols, H = cls.rows;
+  int turned = 0;
+  for (int y = std::max(1, y0); y < std::min(H - 1, y1); ++y) {
+    std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+    const std::uint8_t* up = cls.ptr<std::uint8_t>(y - 1);
+    const std::uint8_t* down = cls.ptr<std::uint8_t>(y + 1);
+    for (int x = 1; x + 1 < W; ++x) {
+      if (x + 8 <= W && !anyUnknown8(c + x)) {
+        x += 7;
+        continue;
+      }
+      if (c[x] != kUnknown) continue;
+      if (c[x - 1] > kGarbage || c[x + 1] > kGarbage || up[x - 1] > kGarbage || up[x] > kGarbage ||
+          up[x + 1] > kGarbage || down[x - 1] > kGarbage || down[x] > kGarbage || down[x + 1] > kGarbage) {
+        continue;
+      }
+      const bool garbage = c[x - 1] == kGarbage || c[x + 1] == kGarbage || up[x - 1] == kGarbage ||
+                           up[x] == kGarbage || up[x + 1] == kGarbage || down[x - 1] == kGarbage ||
+                           down[x] == kGarbage || down[x + 1] == kGarbage;
+      c[x] = garbage ? kGarbage : kScreen;
+      ++turned;
+    }
+  }
+  return turned;
+}
+
 // Plain (no member initialisers): edgeAlpha's candidate arrays are filled before they are read,
 // and zeroing them on every call cost about a fifth of its time (measured).
 struct Rgb {
@@ -392,6 +434,15 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     const std::uint8_t* p = img.ptr<std::uint8_t>(yy) + 3 * xx;
     return Rgb{lut[p[0]], lut[p[1]], lut[p[2]]};
   };
+  // Interior first, on the classes alone: no background in the window but the pixel itself
+  // (a background pixel being refined is not its own B). Most refined pixels of a noisy plate
+  // are unknown pixels inside a dark costume part; reading their window's colours is the cost.
+  bool any_bg = false;
+  for (int yy = y0; yy <= y1 && !any_bg; ++yy) {
+    const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
+    for (int xx = x0; xx <= x1; ++xx) any_bg |= c[xx] <= kGarbage && (xx != x || yy != y);
+  }
+  if (!any_bg) return -1.0f;
   constexpr int kMaxCandidates = 49;  // (2 * 3 + 1)^2
   // The window's sums per class, accumulated in scan order in locals (kept in registers: a sum
   // picked by reference per pixel went through memory, measured ~15 % of the keyer's time).
@@ -784,6 +835,11 @@ KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
     floodGarbage(cls, stack);
   }
 
+  int lone = 0;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : lone)
+  for (int band = 0; band < bands; ++band) {
+    lone += dropLoneUnknown(cls, band * kBandRows, std::min(H, (band + 1) * kBandRows));
+  }
   // Pass 2: alpha (8-bit). Background 0, foreground 255; the two-colour alpha for unknown
   // pixels and for pixels with a 4-neighbour on the other side (a background pixel beside the
   // foreground may hold a little of it: a dark costume's edge keeps the screen's chroma).
@@ -866,6 +922,7 @@ KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
     }
   }
   result.stats.unknown_px = unknown;
+  result.stats.lone_unknown_px = lone;
   result.stats.garbage_px = garbage;
   cleanSilhouette(result.silhouette, alpha8_, options_, result.stats);
   if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);

@@ -13,7 +13,8 @@
 //     the plate's non-screen region connected to the border, keyed by difference against the
 //     plate; without one, pixels of the colour of the non-screen band along the image border,
 //     connected to the border through such pixels (so the actor in front of it is kept) or to
-//     the zone remembered from earlier frames (gaps the actor encloses).
+//     the zone remembered from earlier frames (gaps the actor encloses). An unknown pixel with
+//     only background around it (its 8 neighbours) is sensor noise and becomes background.
 //  2. Pixels at a transition (unknown, or a neighbour of another class) get a two-colour alpha:
 //     the local background B (mean of the background neighbours, or the plate scaled by the
 //     neighbours' shadow factor) and the best-fitting pure foreground neighbour F; alpha is the
@@ -89,6 +90,7 @@ struct ScreenModel {
 
 struct KeyStats {
   int unknown_px = 0;      // pixels given a two-colour alpha
+  int lone_unknown_px = 0; // unknown pixels among background only (sensor noise): background
   int garbage_px = 0;      // pixels dropped by the garbage matte
   int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
   int holes_filled = 0;    // holes filled (smaller than min_hole_px)

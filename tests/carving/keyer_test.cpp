@@ -287,6 +287,40 @@ TEST(Keyer, CleansSpecksAndHolesButKeepsThinLimbs) {
   EXPECT_NEAR(cv::countNonZero(r.silhouette), expected, 4);
 }
 
+// Sensor noise on the screen: pixels alone among screen pixels that the first pass cannot call
+// screen are background (noise, not a part of the actor), neither refined nor turned into
+// one-pixel specks. The same colour on a one-pixel diagonal strand (8-connected, longer than a
+// speck) or on a pair of pixels is refined as before: the strand is kept, the pair is a speck.
+TEST(Keyer, LoneUnknownPixelsAreScreenNoiseButThinStrandsAreRefined) {
+  const cv::Vec3b screen(99, 183, 81), torso(60, 70, 170);
+  // 35 % torso, 65 % screen, mixed in linear light: 55 % of the screen's chroma, between the
+  // screen's (85 %) and the foreground's (40 %) thresholds, so the first pass leaves it unknown.
+  const cv::Vec3b mix(88, 155, 122);
+  cv::Mat img(240, 320, CV_8UC3, screen);
+  img(cv::Rect(40, 40, 60, 120)).setTo(torso);
+  const cv::Point lone[] = {{150, 30}, {200, 100}, {250, 200}, {300, 50}, {120, 220}};
+  for (const cv::Point& p : lone) img.at<cv::Vec3b>(p) = mix;
+  for (int i = 0; i < 80; ++i) img.at<cv::Vec3b>(110 + i, 150 + i) = mix;  // diagonal strand
+  img.at<cv::Vec3b>(180, 160) = img.at<cv::Vec3b>(180, 161) = mix;         // a pair
+  Keyer keyer;
+  const KeyResult r = keyer.key(img, "hand-made");
+  EXPECT_EQ(r.stats.lone_unknown_px, 5);
+  EXPECT_EQ(r.stats.specks_removed, 1);  // the pair
+  for (const cv::Point& p : lone) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        EXPECT_EQ(r.alpha.at<float>(p.y + dy, p.x + dx), 0.0f) << p << " + (" << dx << ", " << dy << ")";
+      }
+    }
+  }
+  for (int i = 0; i < 80; ++i) {
+    EXPECT_GE(r.alpha.at<float>(110 + i, 150 + i), 0.3f) << "strand pixel " << i;
+    EXPECT_EQ(r.silhouette.at<std::uint8_t>(110 + i, 150 + i), 255) << "strand pixel " << i;
+  }
+  EXPECT_EQ(r.silhouette.at<std::uint8_t>(100, 70), 255);  // the torso
+  EXPECT_EQ(cv::countNonZero(r.silhouette), 60 * 120 + 80);
+}
+
 // The surroundings beyond the screen (a dark grey band along the top border, as a witness sees
 // the studio over the cyclorama) are background; the actor standing in front of them is not, and
 // neither is a dark grey patch of the actor's own away from them.

@@ -45,7 +45,8 @@ struct Studio {
 
   // What the take's camera 'index' films at time t (layers: scene.h), as synthesizeTake renders
   // it: 4 samples per pixel, no noise, no blur, unit gain.
-  synth::RenderedView render(int index, double time_s, unsigned layers, bool truth = true) const {
+  synth::RenderedView render(int index, double time_s, unsigned layers, bool truth = true,
+                             double noise_sigma = 0.0) const {
     const RigCamera& c = rig.cameras[static_cast<size_t>(index)];
     const Pose T_world_cam = c.role == "main"
                                  ? synth::mainCameraPose(time_s, config.take_duration_s, true)
@@ -54,6 +55,7 @@ struct Studio {
     synth::RenderOptions options;
     options.camera_index = index;
     options.truth = truth;
+    options.noise_sigma = noise_sigma;
     return synth::renderView(c.camera, T_world_cam, scene, options);
   }
   int mainIndex() const {
@@ -174,6 +176,48 @@ TEST(KeyerStudio, WitnessSilhouettesMatchTruthWithAndWithoutCleanPlate) {
                 static_cast<double>(costume_kept[mode]) / costume_total,
                 static_cast<double>(shadow_in[mode]) / shadow_total);
   }
+}
+
+// A camera's footage has sensor noise: the same frame (t = 5.5 s, every witness, no clean plate,
+// as the default take is keyed) rendered with Gaussian noise of 2 grey levels keys nearly as
+// well as the noise-free render, and the noise adds no silhouette and almost no alpha away from
+// the actor (more than 3 px from the true foreground). Measured: IoU 0 to 0.0012 below the
+// noise-free key's; alpha > 0 added on 2.2e-5 of the pixels away from the actor (5.2e-5 when lone
+// unknown pixels are not taken for noise).
+TEST(KeyerStudio, SensorNoiseCostsTheSilhouettesLittle) {
+  const Studio s;
+  const double t = 5.5;
+  long long stray_alpha = 0, far_px = 0, lone = 0;
+  for (int cam = 0; cam < static_cast<int>(s.rig.cameras.size()); ++cam) {
+    if (s.rig.cameras[static_cast<size_t>(cam)].role != "witness") continue;
+    const std::string name = s.rig.cameras[static_cast<size_t>(cam)].camera.name;
+    const synth::RenderedView clean = s.render(cam, t, synth::kLayersPlate);
+    const synth::RenderedView noisy = s.render(cam, t, synth::kLayersPlate, false, 2.0);
+    const cv::Mat truth = foregroundTruth(clean.labels);
+    Keyer from_clean, from_noisy;
+    const KeyResult a = from_clean.key(clean.bgr, name + " noise-free");
+    const KeyResult b = from_noisy.key(noisy.bgr, name + " noise 2");
+    const double iou_clean = iou(a.silhouette, truth), iou_noisy = iou(b.silhouette, truth);
+    std::printf("%-10s IoU noise-free %.4f, noise 2 %.4f; lone unknown px %d\n", name.c_str(), iou_clean,
+                iou_noisy, b.stats.lone_unknown_px);
+    // (A fresh Keyer: no memory of the surroundings seen through the gap between the raised arm
+    // and the head, so witness03 is at 0.986 here, 0.996 in a take; the main test keys in order.)
+    ASSERT_GT(iou_clean, 0.98) << name;
+    EXPECT_GE(iou_noisy, iou_clean - 0.003) << name;
+    cv::Mat near;
+    cv::dilate(truth, near, cv::Mat(), cv::Point(-1, -1), 3);
+    const cv::Mat far = ~near;
+    // What the noise adds away from the actor (both keys may hold some of that gap).
+    EXPECT_EQ(cv::countNonZero(b.silhouette & ~a.silhouette & far), 0) << name;
+    stray_alpha += cv::countNonZero((b.alpha > 0) & (a.alpha == 0) & far);
+    far_px += cv::countNonZero(far);
+    lone += b.stats.lone_unknown_px;
+  }
+  ASSERT_GT(far_px, 5000000);
+  std::printf("alpha > 0 away from the actor: %lld of %lld px (%.1e); lone unknown px %lld\n", stray_alpha,
+              far_px, static_cast<double>(stray_alpha) / far_px, lone);
+  EXPECT_LE(static_cast<double>(stray_alpha) / far_px, 5e-5);
+  EXPECT_GT(lone, 1000);  // the noise does reach the first pass's unknown class
 }
 
 // Main plate: on the silhouette's edge (0.1 < alpha < 0.9) the raw pixel is a mix with the screen

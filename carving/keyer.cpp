@@ -381,38 +381,53 @@ void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
   }
 }
 
-// Lone unknown pixels of rows [y0, y1) (not the image's outer rows and columns): an unknown
-// pixel whose 8 neighbours are all background is sensor noise on the screen or the surroundings
-// (a pixel of foreground alone would be a speck, which the silhouette's cleaning removes), so it
-// becomes background (garbage when a neighbour is, else screen) and neither it nor its
-// neighbours are refined. A pixel turned here has no unknown neighbour, so no other pixel's test
-// reads it: bands run in parallel and the result does not depend on their order.
-// Returns the pixels turned.
-int dropLoneUnknown(cv::Mat& cls, int y0, int y1) {
+// Lone unknown pixels of rows [y0, y1) (2 px or more inside the image): an unknown pixel whose 8
+// neighbours are background, or whose 3 x 3 neighbourhood holds only background and unknown
+// pixels and whose ring at distance 2 only background (a cluster of at most 9 unknown pixels
+// with background all round), is sensor noise on the screen or the surroundings (foreground that
+// small would be a speck, which the silhouette's cleaning removes). Such pixels become background
+// (garbage when the window holds garbage, else screen), so that neither they nor their
+// neighbours are refined. Read-only on the classes (bands run in parallel); the caller applies
+// 'out' afterwards.
+void findLoneUnknown(const cv::Mat& cls, int y0, int y1, std::vector<detail::LonePixel>& out) {
   const int W = cls.cols, H = cls.rows;
-  int turned = 0;
-  for (int y = std::max(1, y0); y < std::min(H - 1, y1); ++y) {
-    std::uint8_t* c = cls.ptr<std::uint8_t>(y);
-    const std::uint8_t* up = cls.ptr<std::uint8_t>(y - 1);
-    const std::uint8_t* down = cls.ptr<std::uint8_t>(y + 1);
-    for (int x = 1; x + 1 < W; ++x) {
+  out.clear();
+  for (int y = std::max(2, y0); y < std::min(H - 2, y1); ++y) {
+    const std::uint8_t* row[5];
+    for (int k = 0; k < 5; ++k) row[k] = cls.ptr<std::uint8_t>(y - 2 + k);
+    const std::uint8_t* c = row[2];
+    for (int x = 2; x + 2 < W; ++x) {
       if (x + 8 <= W && !anyUnknown8(c + x)) {
         x += 7;
         continue;
       }
       if (c[x] != kUnknown) continue;
-      if (c[x - 1] > kGarbage || c[x + 1] > kGarbage || up[x - 1] > kGarbage || up[x] > kGarbage ||
-          up[x + 1] > kGarbage || down[x - 1] > kGarbage || down[x] > kGarbage || down[x + 1] > kGarbage) {
-        continue;
+      // Alone: the 8 neighbours are background. In a small cluster: the 3 x 3 holds no
+      // foreground and the ring at distance 2 only background.
+      bool alone = true, cluster = true, garbage = false, garbage_near = false;
+      for (int dy = -2; dy <= 2 && (alone || cluster); ++dy) {
+        const std::uint8_t* r = row[dy + 2];
+        for (int dx = -2; dx <= 2; ++dx) {
+          if (dx == 0 && dy == 0) continue;
+          const bool inner = std::abs(dx) <= 1 && std::abs(dy) <= 1;
+          const std::uint8_t k = r[x + dx];
+          if (inner) {
+            alone &= k <= kGarbage;
+            cluster &= k <= kUnknown;
+            garbage_near |= k == kGarbage;
+          } else {
+            cluster &= k <= kGarbage;
+          }
+          garbage |= k == kGarbage;
+        }
       }
-      const bool garbage = c[x - 1] == kGarbage || c[x + 1] == kGarbage || up[x - 1] == kGarbage ||
-                           up[x] == kGarbage || up[x + 1] == kGarbage || down[x - 1] == kGarbage ||
-                           down[x] == kGarbage || down[x + 1] == kGarbage;
-      c[x] = garbage ? kGarbage : kScreen;
-      ++turned;
+      if (alone) {
+        out.push_back({x, y, garbage_near ? kGarbage : kScreen});
+      } else if (cluster) {
+        out.push_back({x, y, garbage ? kGarbage : kScreen});
+      }
     }
   }
-  return turned;
 }
 
 // Plain (no member initialisers): edgeAlpha's candidate arrays are filled before they are read,
@@ -835,10 +850,15 @@ KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
     floodGarbage(cls, stack);
   }
 
-  int lone = 0;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : lone)
+  band_lone_.resize(bands);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int band = 0; band < bands; ++band) {
-    lone += dropLoneUnknown(cls, band * kBandRows, std::min(H, (band + 1) * kBandRows));
+    findLoneUnknown(cls, band * kBandRows, std::min(H, (band + 1) * kBandRows), band_lone_[band]);
+  }
+  int lone = 0;
+  for (const std::vector<detail::LonePixel>& band : band_lone_) {
+    for (const detail::LonePixel& p : band) cls.at<std::uint8_t>(p.y, p.x) = p.cls;
+    lone += static_cast<int>(band.size());
   }
   // Pass 2: alpha (8-bit). Background 0, foreground 255; the two-colour alpha for unknown
   // pixels and for pixels with a 4-neighbour on the other side (a background pixel beside the

@@ -13,8 +13,8 @@
 //     the plate's non-screen region connected to the border, keyed by difference against the
 //     plate; without one, pixels of the colour of the non-screen band along the image border,
 //     connected to the border through such pixels (so the actor in front of it is kept) or to
-//     the zone remembered from earlier frames (gaps the actor encloses). An unknown pixel with
-//     only background around it (its 8 neighbours) is sensor noise and becomes background.
+//     the zone remembered from earlier frames (gaps the actor encloses). Unknown pixels in a
+//     cluster within 3 x 3 with background all round are sensor noise and become background.
 //  2. Pixels at a transition (unknown, or a neighbour of another class) get a two-colour alpha:
 //     the local background B (mean of the background neighbours, or the plate scaled by the
 //     neighbours' shadow factor) and the best-fitting pure foreground neighbour F; alpha is the
@@ -25,6 +25,7 @@
 //     removed / filled (no morphological opening: thin limbs survive).
 // One Keyer per camera: the screen model is estimated once (plate or first frame) and reused; a
 // Keyer keeps per-camera state and scratch, so key cameras in parallel with one Keyer each.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -90,7 +91,7 @@ struct ScreenModel {
 
 struct KeyStats {
   int unknown_px = 0;      // pixels given a two-colour alpha
-  int lone_unknown_px = 0; // unknown pixels among background only (sensor noise): background
+  int lone_unknown_px = 0; // unknown pixels in clusters within 3 x 3 among background (sensor noise)
   int garbage_px = 0;      // pixels dropped by the garbage matte
   int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
   int holes_filled = 0;    // holes filled (smaller than min_hole_px)
@@ -101,6 +102,13 @@ struct KeyResult {
   cv::Mat silhouette;  // CV_8UC1, 255 inside, 0 outside
   KeyStats stats;
 };
+
+namespace detail {
+struct LonePixel {  // an unknown pixel taken for sensor noise (keyer.cpp)
+  int x, y;
+  std::uint8_t cls;  // the background class it becomes
+};
+}  // namespace detail
 
 class Keyer {
  public:
@@ -124,6 +132,7 @@ class Keyer {
   // Scratch reused from frame to frame (the hot loops allocate nothing).
   cv::Mat classes_, alpha8_, need_rows_;
   std::vector<std::vector<cv::Point>> band_refined_, band_seeds_;
+  std::vector<std::vector<detail::LonePixel>> band_lone_;
 };
 
 // Spill suppression for the main plate (8-bit sRGB BGR in and out), given the frame's key (with

@@ -331,10 +331,11 @@ TEST(Keyer, CleansSpecksAndHolesButKeepsThinLimbs) {
   EXPECT_NEAR(cv::countNonZero(r.silhouette), expected, 4);
 }
 
-// Sensor noise on the screen: pixels alone among screen pixels that the first pass cannot call
-// screen are background (noise, not a part of the actor), neither refined nor turned into
-// one-pixel specks. The same colour on a one-pixel diagonal strand (8-connected, longer than a
-// speck) or on a pair of pixels is refined as before: the strand is kept, the pair is a speck.
+// Sensor noise on the screen: pixels that the first pass cannot call screen, alone or in a
+// cluster within 3 x 3 among screen pixels, are background (noise, not a part of the actor),
+// neither refined nor turned into specks. The same colour on a one-pixel diagonal strand
+// (8-connected, longer than a speck) or on a run of 4 pixels is refined as before: the strand is
+// kept, the run is a speck.
 TEST(Keyer, LoneUnknownPixelsAreScreenNoiseButThinStrandsAreRefined) {
   const cv::Vec3b screen(99, 183, 81), torso(60, 70, 170);
   // 35 % torso, 65 % screen, mixed in linear light: 55 % of the screen's chroma, between the
@@ -345,12 +346,13 @@ TEST(Keyer, LoneUnknownPixelsAreScreenNoiseButThinStrandsAreRefined) {
   const cv::Point lone[] = {{150, 30}, {200, 100}, {250, 200}, {300, 50}, {120, 220}};
   for (const cv::Point& p : lone) img.at<cv::Vec3b>(p) = mix;
   for (int i = 0; i < 80; ++i) img.at<cv::Vec3b>(110 + i, 150 + i) = mix;  // diagonal strand
-  img.at<cv::Vec3b>(180, 160) = img.at<cv::Vec3b>(180, 161) = mix;         // a pair
+  img.at<cv::Vec3b>(180, 160) = img.at<cv::Vec3b>(181, 161) = mix;         // a diagonal pair
+  img(cv::Rect(100, 200, 4, 1)).setTo(mix);                                // a run of 4
   Keyer keyer;
   const KeyResult r = keyer.key(img, "hand-made");
-  EXPECT_EQ(r.stats.lone_unknown_px, 5);
-  EXPECT_EQ(r.stats.specks_removed, 1);  // the pair
-  for (const cv::Point& p : lone) {
+  EXPECT_EQ(r.stats.lone_unknown_px, 5 + 2);
+  EXPECT_EQ(r.stats.specks_removed, 1);  // the run
+  for (const cv::Point& p : {lone[0], lone[1], lone[2], lone[3], lone[4], cv::Point(160, 180)}) {
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
         EXPECT_EQ(r.alpha.at<float>(p.y + dy, p.x + dx), 0.0f) << p << " + (" << dx << ", " << dy << ")";

@@ -182,7 +182,7 @@ TEST(KeyerStudio, WitnessSilhouettesMatchTruthWithAndWithoutCleanPlate) {
 // as the default take is keyed) rendered with Gaussian noise of 2 grey levels keys nearly as
 // well as the noise-free render, and the noise adds no silhouette and almost no alpha away from
 // the actor (more than 3 px from the true foreground). Measured: IoU 0 to 0.0012 below the
-// noise-free key's; alpha > 0 added on 2.2e-5 of the pixels away from the actor (5.2e-5 when lone
+// noise-free key's; alpha > 0 added on 1.7e-5 of the pixels away from the actor (5.2e-5 when lone
 // unknown pixels are not taken for noise).
 TEST(KeyerStudio, SensorNoiseCostsTheSilhouettesLittle) {
   const Studio s;

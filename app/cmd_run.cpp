@@ -12,6 +12,7 @@
 #include <iostream>
 #include <map>
 #include <numeric>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -342,6 +343,14 @@ double median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
+// The sensor noise a synthetic take was rendered with (take.json "options"), if it says.
+std::optional<double> takeNoiseSigma(const nlohmann::json& take) {
+  const nlohmann::json options = take.value("options", nlohmann::json::object());
+  if (!options.is_object() || !options.contains("noise_sigma") || !options["noise_sigma"].is_number())
+    return std::nullopt;
+  return options["noise_sigma"].get<double>();
+}
+
 int runBench(const BenchArgs& a) {
   fs::path take_dir = a.take;
   if (take_dir.empty()) {
@@ -373,9 +382,8 @@ int runBench(const BenchArgs& a) {
     bool have = false;
     if (fs::exists(take_dir / "take.json")) {
       const nlohmann::json t = readJsonFile(take_dir / "take.json");
-      const nlohmann::json options = t.value("options", nlohmann::json::object());
-      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps && options.is_object() &&
-             options.value("noise_sigma", -1.0) == so.noise_sigma;
+      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps &&
+             takeNoiseSigma(t) == so.noise_sigma;
     }
     if (!have) {
       std::cerr << "bench run: rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080, noise "
@@ -460,10 +468,8 @@ int runBench(const BenchArgs& a) {
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()}};
   // The plates' sensor noise, as the take records it (synthetic takes): the keyer's work grows with it.
   if (fs::exists(take_dir / "take.json")) {
-    const nlohmann::json t = readJsonFile(take_dir / "take.json");
-    const nlohmann::json options = t.value("options", nlohmann::json::object());
-    if (options.is_object() && options.contains("noise_sigma") && options["noise_sigma"].is_number())
-      j["noise_sigma"] = options["noise_sigma"];
+    const std::optional<double> noise = takeNoiseSigma(readJsonFile(take_dir / "take.json"));
+    if (noise) j["noise_sigma"] = *noise;
   }
   // The props stage searches whole frames when the frames are further apart than its filter
   // bridges (the default take: 2 s) and predicted regions at camera rate.

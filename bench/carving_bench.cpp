@@ -121,62 +121,6 @@ double median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
-// Keyers per camera (the screen model is estimated on the first frame and reused, as live).
-struct Keying {
-  std::vector<Keyer> witness;
-  Keyer main;
-  std::vector<cv::Mat> silhouettes;
-  cv::Mat main_silhouette;
-  explicit Keying(int threads) : main(mainOptions(threads)) {
-    KeyerOptions o;
-    o.soft_alpha = false;  // carving needs the silhouette only
-    o.threads = threads;
-    const Frame& f = frame();
-    for (size_t c = 0; c < f.plates.size(); ++c) witness.emplace_back(o);
-    silhouettes.resize(f.plates.size());
-    for (size_t c = 0; c < f.plates.size(); ++c)
-      silhouettes[c] = witness[c].key(f.plates[c], f.witnesses[c].camera.name).silhouette;
-    main_silhouette = main.key(f.main_plate, "main").silhouette;
-  }
-  static KeyerOptions mainOptions(int threads) {
-    KeyerOptions o;
-    o.remember_garbage_zone = false;  // the main camera moves on its dolly
-    o.threads = threads;
-    return o;
-  }
-};
-Keying& keying(int threads) {
-  static std::map<int, std::unique_ptr<Keying>> k;
-  if (!k[threads]) k[threads] = std::make_unique<Keying>(threads);
-  return *k[threads];
-}
-
-// Every stage runs with 1 thread and with the machine's threads (2 on the target). On a shared
-// machine the 1-thread CPU time is the figure that does not move with the other jobs.
-int benchThreads(const benchmark::State& state) {
-  return state.range(1) > 0 ? static_cast<int>(state.range(1))
-                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-}
-std::string threadKey(int threads) { return "_t" + std::to_string(threads); }
-
-double iou(const cv::Mat& a, const cv::Mat& b) {
-  const double inter = cv::countNonZero(a & b), uni = cv::countNonZero(a | b);
-  return uni > 0 ? inter / uni : 1.0;
-}
-
-void BM_KeyWitness(benchmark::State& state) {
-  const Frame& f = frame();
-  const int threads = benchThreads(state);
-  Keying& k = keying(threads);
-  for (auto _ : state) {
-    for (size_t c = 0; c < f.plates.size(); ++c) {
-      const Stopwatch sw;
-      KeyResult r = k.witness[c].key(f.plates[c], f.witnesses[c].camera.name);
-      record("1_key_witness" + threadKey(threads), "key_witness", "1280x720", sw, 5.0 / 9, threads);
-      benchmark::DoNotOptimize(r.silhouette.data);
-    }
-  }
-}
 // The same witness plates with sensor noise (Gaussian, sigma 2 grey levels, fixed seed, added to
 // the 8-bit codes as the studio renderer adds it): a camera's footage, where the first pass
 // leaves more pixels unknown (dark costume parts, the dark surroundings) than on clean renders.
@@ -196,46 +140,83 @@ const std::vector<cv::Mat>& noisyPlates() {
   }();
   return noisy;
 }
-struct NoisyKeying {
-  std::vector<Keyer> witness;
+
+// Keyers per witness over one set of plates (the screen model is estimated on the first key and
+// reused, as live), and that first key's silhouettes.
+struct WitnessKeying {
+  const std::vector<cv::Mat>* plates;
+  std::vector<Keyer> keyers;
   std::vector<cv::Mat> silhouettes;
-  explicit NoisyKeying(int threads) {
+  WitnessKeying(const std::vector<cv::Mat>& p, int threads) : plates(&p) {
     KeyerOptions o;
-    o.soft_alpha = false;
+    o.soft_alpha = false;  // carving needs the silhouette only
     o.threads = threads;
     const Frame& f = frame();
-    for (size_t c = 0; c < f.plates.size(); ++c) {
-      witness.emplace_back(o);
-      silhouettes.push_back(witness.back().key(noisyPlates()[c], f.witnesses[c].camera.name).silhouette);
+    for (size_t c = 0; c < p.size(); ++c) {
+      keyers.emplace_back(o);
+      silhouettes.push_back(keyers.back().key(p[c], f.witnesses[c].camera.name).silhouette);
     }
   }
 };
-NoisyKeying& noisyKeying(int threads) {
-  static std::map<int, std::unique_ptr<NoisyKeying>> k;
-  if (!k[threads]) k[threads] = std::make_unique<NoisyKeying>(threads);
-  return *k[threads];
+// The rendered plates (noisy = false) or the same with sensor noise.
+WitnessKeying& witnessKeying(bool noisy, int threads) {
+  static std::map<std::pair<bool, int>, std::unique_ptr<WitnessKeying>> k;
+  std::unique_ptr<WitnessKeying>& w = k[{noisy, threads}];
+  if (!w) w = std::make_unique<WitnessKeying>(noisy ? noisyPlates() : frame().plates, threads);
+  return *w;
 }
-void BM_KeyWitnessNoisy(benchmark::State& state) {
+Keyer& mainKeyer(int threads) {
+  static std::map<int, std::unique_ptr<Keyer>> k;
+  std::unique_ptr<Keyer>& m = k[threads];
+  if (!m) {
+    KeyerOptions o;
+    o.remember_garbage_zone = false;  // the main camera moves on its dolly
+    o.threads = threads;
+    m = std::make_unique<Keyer>(o);
+    m->key(frame().main_plate, "main");
+  }
+  return *m;
+}
+
+// Every stage runs with 1 thread and with the machine's threads (2 on the target). On a shared
+// machine the 1-thread CPU time is the figure that does not move with the other jobs.
+int benchThreads(const benchmark::State& state) {
+  return state.range(1) > 0 ? static_cast<int>(state.range(1))
+                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+std::string threadKey(int threads) { return "_t" + std::to_string(threads); }
+
+double iou(const cv::Mat& a, const cv::Mat& b) {
+  const double inter = cv::countNonZero(a & b), uni = cv::countNonZero(a | b);
+  return uni > 0 ? inter / uni : 1.0;
+}
+
+// Keys every witness once per iteration, one record per camera.
+void timeWitnessKeys(benchmark::State& state, bool noisy, const std::string& key, const std::string& stage,
+                     const std::string& extra) {
   const Frame& f = frame();
   const int threads = benchThreads(state);
-  NoisyKeying& k = noisyKeying(threads);
+  WitnessKeying& k = witnessKeying(noisy, threads);
   for (auto _ : state) {
-    for (size_t c = 0; c < f.plates.size(); ++c) {
+    for (size_t c = 0; c < k.keyers.size(); ++c) {
       const Stopwatch sw;
-      KeyResult r = k.witness[c].key(noisyPlates()[c], f.witnesses[c].camera.name);
-      record("1b_key_witness_noise2" + threadKey(threads), "key_witness_noise2", "1280x720", sw, 5.0 / 9, threads,
-             "\"noise_sigma\":2");
+      KeyResult r = k.keyers[c].key((*k.plates)[c], f.witnesses[c].camera.name);
+      record(key + threadKey(threads), stage, "1280x720", sw, 5.0 / 9, threads, extra);
       benchmark::DoNotOptimize(r.silhouette.data);
     }
   }
 }
+void BM_KeyWitness(benchmark::State& state) { timeWitnessKeys(state, false, "1_key_witness", "key_witness", ""); }
+void BM_KeyWitnessNoisy(benchmark::State& state) {
+  timeWitnessKeys(state, true, "1b_key_witness_noise2", "key_witness_noise2", "\"noise_sigma\":2");
+}
 void BM_KeyMain(benchmark::State& state) {
   const Frame& f = frame();
   const int threads = benchThreads(state);
-  Keying& k = keying(threads);
+  Keyer& main = mainKeyer(threads);
   for (auto _ : state) {
     const Stopwatch sw;
-    KeyResult r = k.main.key(f.main_plate, "main");
+    KeyResult r = main.key(f.main_plate, "main");
     record("2_key_main" + threadKey(threads), "key_main", "1920x1080", sw, 5.0 / 9, threads);
     benchmark::DoNotOptimize(r.silhouette.data);
   }
@@ -493,10 +474,12 @@ int main(int argc, char** argv) {
       k.cpu_ms.push_back(8 * median(r[w].cpu_ms) + median(r[m].cpu_ms));
     }
   }
-  double worst_iou = 1;
-  const Keying& keyed = keying(machine_threads);
-  for (size_t c = 0; c < keyed.silhouettes.size(); ++c)
-    worst_iou = std::min(worst_iou, iou(keyed.silhouettes[c], frame().truth_foreground[c]));
+  auto worstIou = [](const WitnessKeying& k) {
+    double worst = 1;
+    for (size_t c = 0; c < k.silhouettes.size(); ++c)
+      worst = std::min(worst, iou(k.silhouettes[c], frame().truth_foreground[c]));
+    return worst;
+  };
   for (const auto& [key, res] : r) {
     const double ms = median(res.ms), cpu = median(res.cpu_ms);
     const double ms_min = *std::min_element(res.ms.begin(), res.ms.end());
@@ -516,11 +499,8 @@ int main(int argc, char** argv) {
     if (!res.extra.empty()) std::printf(",%s", res.extra.c_str());
     std::printf("}\n");
   }
-  double worst_noisy_iou = 1;
-  const NoisyKeying& noisy = noisyKeying(machine_threads);
-  for (size_t c = 0; c < noisy.silhouettes.size(); ++c)
-    worst_noisy_iou = std::min(worst_noisy_iou, iou(noisy.silhouettes[c], frame().truth_foreground[c]));
   std::printf("{\"stage\":\"key_check\",\"worst_witness_iou_vs_truth\":%.4f,"
-              "\"worst_witness_iou_vs_truth_noise2\":%.4f}\n", worst_iou, worst_noisy_iou);
+              "\"worst_witness_iou_vs_truth_noise2\":%.4f}\n",
+              worstIou(witnessKeying(false, machine_threads)), worstIou(witnessKeying(true, machine_threads)));
   return 0;
 }

@@ -44,7 +44,7 @@ struct Studio {
   Rig rig = synth::studioRig(synth::StudioRigOptions{}, config.take_duration_s, true);
 
   // What the take's camera 'index' films at time t (layers: scene.h), as synthesizeTake renders
-  // it: 4 samples per pixel, no noise, no blur, unit gain.
+  // it: 4 samples per pixel, no blur, unit gain, sensor noise noise_sigma (grey levels).
   synth::RenderedView render(int index, double time_s, unsigned layers, bool truth = true,
                              double noise_sigma = 0.0) const {
     const RigCamera& c = rig.cameras[static_cast<size_t>(index)];

@@ -430,16 +430,24 @@ void findLoneUnknown(const cv::Mat& cls, int y0, int y1, std::vector<detail::Lon
   }
 }
 
+// F's candidates: aligned foreground neighbours at least this fraction of the purest one's
+// distance from B. Measured on 24 studio keys against the exact 4-sample coverage, sensor noise
+// 2, no plate, against the purest alone: alpha on mixed pixels RMS error 0.093 -> 0.089, bias
+// -0.024 -> -0.009; silhouette pixels wrong 3041 -> 2775. 0.7 removes the bias, but its F takes
+// in mixed neighbours, and the despilled main plate keeps screen green on 2 % of its edge.
+constexpr float kPureReach = 0.8f;
+
 // Plain (no member initialisers): edgeAlpha's candidate arrays are filled before they are read,
 // and zeroing them on every call cost about a fifth of its time (measured).
 struct Rgb {
   float b, g, r;
 };
 
-// Two-colour alpha of pixel (x, y) from its window: B = local background, F = the foreground
-// neighbour whose line to B passes closest to the pixel's colour (ties: the farthest from B,
-// i.e. the purest). Returns -1 when the window has no background (interior: alpha 1) and -2
-// when it has no foreground to mix with (alpha 0).
+// Two-colour alpha of pixel (x, y) from its window: B = local background, F = the mean of the
+// foreground neighbours whose lines to B pass closest to the pixel's colour and that are nearly
+// the purest of those (at least kPureReach of the farthest one's distance from B). Returns -1
+// when the window has no background (interior: alpha 1) and -2 when it has no foreground to mix
+// with (alpha 0).
 float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, bool use_plate,
                 int x, int y, int radius) {
   const auto& lut = srgb8ToLinear();
@@ -566,7 +574,22 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     if (sine2[i] <= tolerance2 && (pick < 0 || reach[i] > reach[pick])) pick = i;
   }
   if (pick < 0 || sine2[pick] > 2.0f) return -2.0f;
-  return std::clamp(t[pick], 0.0f, 1.0f);
+  // F is the mean of the aligned candidates nearly as far as the farthest: the farthest alone
+  // is the noisiest of them (the largest of several noisy distances), which understated alpha
+  // under sensor noise, and a single pixel's noise went into alpha unaveraged.
+  const float min_reach = kPureReach * kPureReach * reach[pick];
+  float pure_b = 0, pure_g = 0, pure_r = 0;
+  int n_pure = 0;
+  for (int i = 0; i < n_candidates; ++i) {
+    if (sine2[i] > tolerance2 || reach[i] < min_reach) continue;
+    pure_b += candidates[i].b, pure_g += candidates[i].g, pure_r += candidates[i].r;
+    ++n_pure;
+  }
+  if (n_pure == 1) return std::clamp(t[pick], 0.0f, 1.0f);
+  const float db = pure_b / n_pure - bg.b, dg = pure_g / n_pure - bg.g, dr = pure_r / n_pure - bg.r;
+  const float dd = db * db + dg * dg + dr * dr;
+  if (dd < 1e-10f) return std::clamp(t[pick], 0.0f, 1.0f);
+  return std::clamp((cb * db + cg * dg + cr * dr) / dd, 0.0f, 1.0f);
 }
 
 // One row of pass 2's bulk: alpha / silhouette 0 on background and 255 elsewhere, need = 1 at a

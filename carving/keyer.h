@@ -17,8 +17,9 @@
 //     cluster within 3 x 3 with background all round are sensor noise and become background.
 //  2. Pixels at a transition (unknown, or a neighbour of another class) get a two-colour alpha:
 //     the local background B (mean of the background neighbours, or the plate scaled by the
-//     neighbours' shadow factor) and the best-fitting pure foreground neighbour F; alpha is the
-//     projection of C - B on F - B in linear light (how anti-aliasing and lenses mix).
+//     neighbours' shadow factor) and the pure foreground F (mean of the best-fitting foreground
+//     neighbours nearly as far from B as the farthest: one pixel alone carries its noise); alpha
+//     is the projection of C - B on F - B in linear light (how anti-aliasing and lenses mix).
 //  3. Silhouette = alpha >= threshold; a pixel near one half is decided by its 3 x 3 mean alpha
 //     (for a straight edge that tells on which side the pixel's centre lies, its own alpha does
 //     not). Then connected components: specks and holes smaller than the options' sizes are

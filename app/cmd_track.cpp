@@ -156,7 +156,7 @@ int runTrack(const TrackArgs& a) {
   for (const std::string& f : s.camera_failures) std::cerr << "track: " << f << "\n";
   const double fps = s.ms > 0 ? 1000.0 * s.frames / s.ms : 0;
   std::cerr << "track: " << s.frames << " frames from " << s.cameras.size() << " cameras, " << s.full_frames
-            << " full-frame searches, " << s.unknown_tags << " tags of no prop ignored, "
+            << " full-frame searches (" << s.rescanned_frames << " after a missed prediction), " << s.unknown_tags << " tags of no prop ignored, "
             << (s.frames ? s.track_ms / s.frames : 0) << " ms/frame tracking, " << fps << " fps overall -> "
             << s.poses.string() << "\n";
   for (const tracking::PropRunSummary& p : s.props) {
@@ -183,6 +183,7 @@ int runTrack(const TrackArgs& a) {
                       {"props", props},
                       {"unknown_tags", s.unknown_tags},
                       {"full_frames", s.full_frames},
+                      {"rescanned_frames", s.rescanned_frames},
                       {"camera_failures", s.camera_failures},
                       {"ms", s.ms},
                       {"track_ms_per_frame", s.frames ? s.track_ms / s.frames : 0},

@@ -218,6 +218,7 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     ++s.frames;
     s.unknown_tags += r.unknown_tags;
     s.full_frames += r.full_frame ? 1 : 0;
+    s.rescanned_frames += r.rescanned_cameras > 0 ? 1 : 0;
     for (const CameraSearch& cs : r.search)
       if (!cs.failure.empty() && cs.failure != "no image")
         s.camera_failures.push_back("camera '" + cs.camera + "': frame " + std::to_string(f) + ": " + cs.failure);

@@ -65,6 +65,7 @@ struct TrackRunSummary {
   std::vector<PropRunSummary> props;
   int unknown_tags = 0;
   int full_frames = 0;
+  int rescanned_frames = 0;          // frames whose predicted regions missed a tracked prop (tracker.h)
   std::vector<std::string> camera_failures;  // "camera 'x': frame 12: reason"
   double ms = 0, track_ms = 0;       // whole run / inside PropTracker::track
   int packets_sent = 0, packets_failed = 0;

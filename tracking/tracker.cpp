@@ -181,25 +181,26 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
 
   // Detection, one camera per iteration; errors are recorded per camera (STYLE.md rule 11).
   std::vector<std::vector<TagDetection>> found(static_cast<size_t>(n_cams));
-  const auto t_detect = std::chrono::steady_clock::now();
-  const int threads = m.options.threads;
-#pragma omp parallel for schedule(dynamic) num_threads(threads > 0 ? threads : omp_get_max_threads())
-  for (int c = 0; c < n_cams; ++c) {
+  const int threads = m.options.threads > 0 ? m.options.threads : omp_get_max_threads();
+  // Camera c's search, its whole frame or the predicted regions, into out.search[c] and found[c].
+  const auto search = [&](int c, bool whole_frame) {
     CameraSearch& s = out.search[static_cast<size_t>(c)];
+    s = CameraSearch{};
     s.camera = m.cameras[static_cast<size_t>(c)].camera.name;
+    found[static_cast<size_t>(c)].clear();
     try {
       const cv::Mat& img = images[static_cast<size_t>(c)];
       const Camera& cam = m.cameras[static_cast<size_t>(c)].camera;
       if (img.empty()) {
         s.failure = "no image";
-        continue;
+        return;
       }
       if (img.cols != cam.width || img.rows != cam.height) {
         s.failure = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", camera is " +
                     std::to_string(cam.width) + "x" + std::to_string(cam.height);
-        continue;
+        return;
       }
-      s.full_frame = whole[static_cast<size_t>(c)] != 0;
+      s.full_frame = whole_frame;
       s.rois = s.full_frame ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
       for (const cv::Rect& r : s.rois) s.pixels += r.area();
       found[static_cast<size_t>(c)] = m.detectors[static_cast<size_t>(c)].detect(img, s.rois);
@@ -207,22 +208,79 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
     } catch (const std::exception& e) {
       s.failure = e.what();
     }
-  }
+  };
+  const auto t_detect = std::chrono::steady_clock::now();
+#pragma omp parallel for schedule(dynamic) num_threads(threads)
+  for (int c = 0; c < n_cams; ++c) search(c, whole[static_cast<size_t>(c)] != 0);
   out.detect_ms = msSince(t_detect);
 
   // Tags -> props.
   const auto t_solve = std::chrono::steady_clock::now();
-  std::vector<std::vector<TagObservation>> obs(m.props.props.size());
-  for (int c = 0; c < n_cams; ++c)
-    for (const TagDetection& d : found[static_cast<size_t>(c)]) {
-      const auto owner = m.props.findTag(d.family, d.id);
-      if (!owner) {
-        ++out.unknown_tags;
-        continue;
+  std::vector<std::vector<TagObservation>> obs;
+  const auto observe = [&] {
+    obs.assign(m.props.props.size(), {});
+    out.unknown_tags = 0;
+    for (int c = 0; c < n_cams; ++c)
+      for (const TagDetection& d : found[static_cast<size_t>(c)]) {
+        const auto owner = m.props.findTag(d.family, d.id);
+        if (!owner) {
+          ++out.unknown_tags;
+          continue;
+        }
+        obs[static_cast<size_t>(owner->first)].push_back(
+            makeTagObservation(m.cameras[static_cast<size_t>(c)].camera, c, owner->second, d.corners_px));
       }
-      obs[static_cast<size_t>(owner->first)].push_back(
-          makeTagObservation(m.cameras[static_cast<size_t>(c)].camera, c, owner->second, d.corners_px));
+  };
+  // The joint solve of tracked prop k, from the filter's prediction when 'prior' and it has one.
+  const auto measure = [&](size_t k, bool prior) {
+    const int p = m.tracked_props[k];
+    const std::vector<TagObservation>& o = obs[static_cast<size_t>(p)];
+    PoseEstimate e;
+    if (o.empty()) {
+      e.failure = "no tag of this prop seen";
+      return e;
     }
+    const Impl::Track& tr = m.tracks[k];
+    Pose predicted;
+    const bool has_prior = prior && tr.live && tr.filter.initialised();
+    if (has_prior) predicted = tr.filter.predict(time_s);
+    e = solvePropPose(m.cameras, m.props.props[static_cast<size_t>(p)], o, m.options.solve,
+                      has_prior ? &predicted : nullptr);
+    if (e.ok && e.sigma_position_m > m.options.max_sigma_position_m) {
+      e.ok = false;
+      e.failure = "pose too uncertain (sigma " + std::to_string(e.sigma_position_m) + " m)";
+    }
+    return e;
+  };
+  observe();
+  std::vector<PoseEstimate> measured(m.tracked_props.size());
+  for (size_t k = 0; k < m.tracked_props.size(); ++k) measured[k] = measure(k, true);
+
+  // A prop tracked until now that its predicted regions do not give (it moved faster than the
+  // filter predicts, or its tags came out from behind the actor elsewhere): the cameras that
+  // searched regions search their whole frames again in this frame, and the prop is solved
+  // afresh (no prior; its filter restarts). A missed prediction costs one frame's whole-frame
+  // search instead of a lost frame.
+  std::vector<char> again(m.tracked_props.size(), 0);
+  for (size_t k = 0; k < m.tracked_props.size(); ++k) again[k] = m.tracks[k].live && !measured[k].ok;
+  std::vector<int> rescan;
+  if (std::find(again.begin(), again.end(), 1) != again.end())
+    for (int c = 0; c < n_cams; ++c)
+      if (!out.search[static_cast<size_t>(c)].full_frame && out.search[static_cast<size_t>(c)].failure.empty())
+        rescan.push_back(c);
+  if (!rescan.empty()) {
+    const auto t_again = std::chrono::steady_clock::now();
+#pragma omp parallel for schedule(dynamic) num_threads(threads)
+    for (int i = 0; i < static_cast<int>(rescan.size()); ++i) search(rescan[static_cast<size_t>(i)], true);
+    const double again_ms = msSince(t_again);
+    out.detect_ms += again_ms;
+    out.rescanned_cameras = static_cast<int>(rescan.size());
+    out.full_frame = std::all_of(out.search.begin(), out.search.end(),
+                                 [](const CameraSearch& s) { return s.full_frame || !s.failure.empty(); });
+    observe();
+    for (size_t k = 0; k < m.tracked_props.size(); ++k)
+      if (again[k]) measured[k] = measure(k, false);
+  }
 
   for (size_t k = 0; k < m.tracked_props.size(); ++k) {
     const int p = m.tracked_props[k];
@@ -231,23 +289,11 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
     PropResult r;
     r.id = def.id;
     r.name = def.name;
-    const std::vector<TagObservation>& o = obs[static_cast<size_t>(p)];
-    if (o.empty()) {
-      r.measured.failure = "no tag of this prop seen";
-    } else {
-      Pose prior;
-      const bool has_prior = tr.live && tr.filter.initialised();
-      if (has_prior) prior = tr.filter.predict(time_s);
-      r.measured = solvePropPose(m.cameras, def, o, m.options.solve, has_prior ? &prior : nullptr);
-      if (r.measured.ok && r.measured.sigma_position_m > m.options.max_sigma_position_m) {
-        r.measured.ok = false;
-        r.measured.failure = "pose too uncertain (sigma " + std::to_string(r.measured.sigma_position_m) + " m)";
-      }
-    }
+    r.measured = std::move(measured[k]);
     if (r.measured.ok) {
       r.tracked = true;
-      r.reacquired = !tr.live;
-      if (!tr.live) tr.filter.reset();
+      r.reacquired = !tr.live || again[k];
+      if (r.reacquired) tr.filter.reset();
       r.T_world_prop = m.options.filter_enabled ? tr.filter.update(time_s, r.measured.T, r.measured.covariance)
                                                 : r.measured.T;
       for (int c : r.measured.cameras) r.cameras.push_back(m.cameras[static_cast<size_t>(c)].camera.name);
@@ -301,6 +347,7 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
           {"unknown_tags", f.unknown_tags},
           {"full_frame", f.full_frame},
           {"whole_frame_cameras", whole},
+          {"rescanned_cameras", f.rescanned_cameras},
           {"rois", rois},
           {"searched_pixels", pixels},
           {"camera_failures", failures},

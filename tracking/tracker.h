@@ -2,7 +2,8 @@
 // PropTracker: the per-frame loop of prop tracking, with the state that must survive between
 // frames (filters, last poses, ROI schedule) in one explicit object (STYLE.md rule 2).
 // A frame: detect tags in every camera (OpenMP over cameras, one TagDetector each) — in the
-// predicted image regions of tracked props, or the full frame on loss and every N frames —;
+// predicted image regions of tracked props, or the full frame on loss and every N frames, and
+// again the full frame in the same frame when a tracked prop is not in its predicted regions —;
 // map tag ids to props (ids of no prop are counted and ignored); solve each prop jointly over
 // every camera (solve.h); filter (filter.h). A prop not found this frame is "lost" and carries no
 // pose: a stale pose is never reported as live.
@@ -54,7 +55,8 @@ struct PropResult {
   Pose T_world_prop = Pose::Identity();      // filtered (= measured when the filter is off)
   PoseEstimate measured;            // the joint solve of this frame (measured.failure when lost)
   std::vector<std::string> cameras; // names of the cameras whose corners were used
-  bool reacquired = false;          // tracked now, lost (or never seen) before
+  bool reacquired = false;          // tracked now, lost (or never seen) before, or found only by the
+                                    // same frame's whole-frame search again (the filter restarts)
 };
 
 struct TrackFrame {
@@ -64,6 +66,9 @@ struct TrackFrame {
   std::vector<CameraSearch> search; // per tracker camera
   int unknown_tags = 0;             // decoded tags that belong to no prop
   bool full_frame = false;          // every camera searched whole
+  // Cameras that searched their whole frame again in this frame because a tracked prop was not
+  // found in its predicted regions (their search holds the whole-frame search).
+  int rescanned_cameras = 0;
   double detect_ms = 0, solve_ms = 0, total_ms = 0;
 };
 

@@ -1,7 +1,7 @@
 // PropTracker over rendered studio frames. Issue 6 item 3: ROI tracking finds the same tags as a
 // full-frame search of the same images (the test asserts the tags; the speed is the benchmark's,
-// bench/tracking_bench.cpp). And a prop that disappears is reported lost, with no pose, until it
-// is seen again.
+// bench/tracking_bench.cpp). A prop that disappears is reported lost, with no pose, until it is
+// seen again; one that is not where it was predicted is found again in the same frame.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -157,6 +157,47 @@ TEST(PropTracker, DisappearingPropIsLostWithoutAPoseThenReacquired) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("frame 4"), std::string::npos) << e.what();
   }
+}
+
+// A prop that is not where the filter predicts it (here it jumps: the take's frames at t = 3 s,
+// then the frame at t = 7.5 s handed over as the next frame at 24 fps, 1.6 m away) is not lost:
+// its predicted regions hold none of its tags, so the cameras search their whole frames again in
+// the same frame, and the pose is solved afresh, the filter restarted (reacquired). (After a
+// shorter jump, 0.5 to 1.4 m, one or two cameras' regions still catch a tag, and that solve
+// tracks it.)
+TEST(PropTracker, PropOutsideItsPredictedRegionsIsFoundInTheSameFrame) {
+  test::StudioFixture fx(std::filesystem::path(PREVIZ_TEST_TMP) / "tracking_stage_cache");
+  const double t0 = 3.0, t1 = 7.5;
+  const Pose T0 = fx.studio.T_world_prop(t0), T1 = fx.studio.T_world_prop(t1);
+  ASSERT_GT(translationDistance(T0, T1), 1.5);  // far beyond the regions' margins
+  const std::vector<cv::Mat> before = fx.renderTake(t0, 0), after = fx.renderTake(t1, 2);
+  TrackerOptions o;
+  o.threads = 2;
+  o.full_frame_every = 0;  // no periodic whole-frame search that could find it by chance
+  PropTracker tracker(fx.rig.cameras, test::studioProps(fx.studio), o);
+  ASSERT_TRUE(tracker.track(0, 0.0, before).props[0].tracked);
+  const TrackFrame steady = tracker.track(1, 1 / kFps, before);
+  ASSERT_TRUE(steady.props[0].tracked);
+  EXPECT_FALSE(steady.full_frame);
+  EXPECT_EQ(steady.rescanned_cameras, 0);
+
+  const TrackFrame jump = tracker.track(2, 2 / kFps, after);
+  ASSERT_TRUE(jump.props[0].tracked) << jump.props[0].measured.failure;
+  EXPECT_TRUE(jump.props[0].reacquired);
+  EXPECT_EQ(jump.rescanned_cameras, fx.cameras());  // every camera had searched regions only
+  EXPECT_TRUE(jump.full_frame);
+  for (const CameraSearch& s : jump.search) EXPECT_TRUE(s.full_frame) << s.camera;
+  // The new place, not a blend with the old one (the filter restarted).
+  EXPECT_LT(translationDistance(jump.props[0].T_world_prop, T1), 0.002);
+  EXPECT_EQ(trackFrameToJson(jump)["rescanned_cameras"], fx.cameras());
+
+  // And it is tracked on from there in its new regions.
+  const TrackFrame next = tracker.track(3, 3 / kFps, after);
+  ASSERT_TRUE(next.props[0].tracked);
+  EXPECT_FALSE(next.props[0].reacquired);
+  EXPECT_FALSE(next.full_frame);
+  EXPECT_EQ(next.rescanned_cameras, 0);
+  EXPECT_LT(translationDistance(next.props[0].T_world_prop, T1), 0.002);
 }
 
 TEST(PropTracker, TagsOfNoPropAreCountedAndIgnored) {

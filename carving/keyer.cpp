@@ -585,7 +585,6 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     pure_b += candidates[i].b, pure_g += candidates[i].g, pure_r += candidates[i].r;
     ++n_pure;
   }
-  if (n_pure == 1) return std::clamp(t[pick], 0.0f, 1.0f);
   const float db = pure_b / n_pure - bg.b, dg = pure_g / n_pure - bg.g, dr = pure_r / n_pure - bg.r;
   const float dd = db * db + dg * dg + dr * dr;
   if (dd < 1e-10f) return std::clamp(t[pick], 0.0f, 1.0f);

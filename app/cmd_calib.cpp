@@ -7,8 +7,6 @@
 #include <memory>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "app/commands.h"
 #include "app/progress.h"
@@ -24,6 +22,9 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "take/sequence.h"
+#include "take/take.h"
+#include "take/video.h"
 
 namespace previz::app {
 namespace {
@@ -47,15 +48,10 @@ struct CalibArgs {
   std::string board_out;
 };
 
-bool isImageFile(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" ||
-         ext == ".bmp" || ext == ".pgm" || ext == ".ppm";
-}
-
-// Where the images come from: a folder of image files (sorted by name) or one video file. Frames
-// are read on demand so that long sequences never sit in memory.
+// Where the images come from: a folder of image files (every image, sorted by name: a calibration
+// folder often holds more than one numbered set, left01.. and right01..) or one video file, read
+// as the take model reads cameras (take/take.h: any bit depth to 8-bit sRGB; a video as far as
+// it decodes, not as far as its header claims). Frames are read on demand.
 class ImageSource {
  public:
   explicit ImageSource(const std::string& path) : path_(path) {
@@ -63,15 +59,19 @@ class ImageSource {
     context.file = path;
     if (fs::is_directory(path_)) {
       for (const auto& entry : fs::directory_iterator(path_)) {
-        if (entry.is_regular_file() && isImageFile(entry.path())) files_.push_back(entry.path());
+        if (entry.is_regular_file() && take::isImageExtension(entry.path())) files_.push_back(entry.path());
       }
       std::sort(files_.begin(), files_.end());
-      if (files_.empty()) throw Error("calib: no image files (png, jpg, tif, bmp) in the folder", context);
+      if (files_.empty()) throw Error("calib: no image files (png, jpg, tif, exr, bmp) in the folder", context);
       count_ = static_cast<int>(files_.size());
     } else if (fs::is_regular_file(path_)) {
-      openVideo();
-      count_ = static_cast<int>(video_->get(cv::CAP_PROP_FRAME_COUNT));
-      if (count_ <= 0) throw Error("calib: the video has no frames", context);
+      try {
+        video_ = std::make_unique<take::VideoReader>(path_, 4);
+        count_ = static_cast<int>(video_->decodableFrames());
+      } catch (const Error& e) {
+        throw Error(std::string("calib: not a folder of images and not a video that decodes: ") + e.message(), context);
+      }
+      if (count_ <= 0) throw Error("calib: no frame of the video decodes", context);
     } else {
       throw Error("calib: no such folder or video", context);
     }
@@ -80,37 +80,23 @@ class ImageSource {
   std::string name(int i) const {
     return files_.empty() ? "frame " + std::to_string(i) : files_[i].filename().string();
   }
-  // Throws Error naming the file when it cannot be read.
+  // Throws Error naming the file (and the video frame) when it cannot be read.
   cv::Mat read(int i) {
-    if (!files_.empty()) return readImage(files_[i], cv::IMREAD_COLOR);
-    if (i < next_frame_) openVideo();
-    cv::Mat frame;
-    while (next_frame_ <= i) {
-      if (!video_->read(frame)) {
-        ErrorContext context;
-        context.file = path_.string();
-        context.frame = next_frame_;
-        throw Error("calib: could not read the video frame", context);
-      }
-      ++next_frame_;
+    if (!files_.empty()) return take::readImage8(files_[i]);
+    take::VideoReader::Frame f = video_->read(i);
+    if (!f.ok()) {
+      ErrorContext context;
+      context.file = path_.string();
+      context.frame = i;
+      throw Error("calib: " + f.error, context);
     }
-    return frame;
+    return f.bgr;
   }
 
  private:
-  void openVideo() {
-    video_ = std::make_unique<cv::VideoCapture>(path_.string());
-    next_frame_ = 0;
-    if (!video_->isOpened()) {
-      ErrorContext context;
-      context.file = path_.string();
-      throw Error("calib: not a folder of images and not a video OpenCV can open", context);
-    }
-  }
   fs::path path_;
   std::vector<fs::path> files_;
-  std::unique_ptr<cv::VideoCapture> video_;
-  int next_frame_ = 0;
+  std::unique_ptr<take::VideoReader> video_;
   int count_ = 0;
 };
 

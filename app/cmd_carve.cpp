@@ -121,7 +121,7 @@ Runner addCarveCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "carve", "Carve the actor's visual hull per frame: main-view depth, mesh, point cloud "
                "(docs/formats.md, \"Carve output\")");
-  cmd->add_option("--take", a->take, "Take folder (cams/<cam>/%06d.png, optional clean/<cam>.png)")
+  cmd->add_option("--take", a->take, "Take folder (cams/: image sequences of any pattern or videos per camera, take.json; optional clean/; docs/formats.md \"Take folder\")")
       ->required();
   cmd->add_option("--rig", a->rig,
                   "rig.json, or text rows of 3x4 projection matrices (name p11..p34) or K R t")
@@ -152,7 +152,7 @@ Runner addCarveCommand(CLI::App& app) {
   cmd->add_flag("--refine", a->refine,
                 "Also write depth_refined/: depth beyond the visual hull by photo-consistency of "
                 "the plates, the witnesses' own refined depths carving free space (photo hull; "
-                "needs cams/<cam>/%06d.png, also with --masks)");
+                "needs the cameras' plates, also with --masks)");
   cmd->add_option("--point-spacing", a->point_spacing_m,
                   "Point cloud: also sample faces this densely, metres (0 = mesh vertices)")
       ->capture_default_str();

@@ -91,10 +91,10 @@ int runComposite(const CompositeArgs& a) {
       ErrorContext c;
       c.camera = main_name;
       c.frame = f;
-      c.file = take.framePath(main_name, f).string();
+      c.file = take.source(main_name, f);
       throw Error("main plate unusable: " + plate.dropped, c);
     }
-    const carving::KeyResult key = keyer.key(plate.image, take.framePath(main_name, f).string());
+    const carving::KeyResult key = keyer.key(plate.image, take.source(main_name, f));
     composite::CompositeInputs in;
     in.foreground = carving::despill(plate.image, key, keyer.screen(), ko);
     in.alpha = key.alpha;
@@ -146,7 +146,7 @@ Runner addCompositeCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "composite", "Composite a take's keyed main plate over its CG frames, depth-aware (docs/formats.md, "
                    "\"Composite output\")");
-  cmd->add_option("--take", a->take, "Take folder (cams/main/%06d.png, cg/)")->required();
+  cmd->add_option("--take", a->take, "Take folder (the main camera's stream in cams/, cg/; docs/formats.md \"Take folder\")")->required();
   cmd->add_option("--out", a->out, "Output folder")->required();
   cmd->add_option("--depth", a->depth,
                   "Actor depth DIR/%06d.exr in the main view (e.g. previz carve's OUT/depth); none: "

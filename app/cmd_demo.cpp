@@ -317,7 +317,7 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
     tracking::PropSet set = tracking::readProps(take_dir / "props.json");
     if (!set.props.empty()) {
       PropStageOptions po;
-      po.fps = takeFps(take_dir);
+      po.fps = take.streams().fps();
       props = std::make_unique<PropStage>(loop, take.rig(), std::move(set), po);
       props->addTo(loop);
     }

@@ -609,7 +609,7 @@ int runResurvey(const RigArgs& a) {
 }
 
 void addInputs(CLI::App* cmd, RigArgs& a) {
-  cmd->add_option("--take", a.take, "Take folder (cams/<name>/%06d.png; docs/formats.md)")->required();
+  cmd->add_option("--take", a.take, "Take folder (cams/: a sequence or video per camera; docs/formats.md \"Take folder\")")->required();
   cmd->add_option("--board", a.board, "Board waved through the volume (board JSON; default <take>/board.json)");
   cmd->add_option("--floor", a.floor,
                   "Floor-board frames and pose, floor.json (docs/formats.md; default <take>/floor.json when present)");

@@ -28,6 +28,8 @@
 #include "core/mesh.h"
 #include "core/pose.h"
 #include "datasets/synth.h"
+#include "take/convert.h"
+#include "take/take.h"
 #include "tracking/props.h"
 #include "tracking/tracker.h"
 
@@ -55,6 +57,7 @@ struct LoopArgs {
   double band_m = 0.04;
   double cg_gain = 1.0;
   int threads = 0;
+  int witness_bin = 1;
   std::string props;
   bool no_props = false;
 };
@@ -78,6 +81,10 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--cg-gain", a.cg_gain, "Linear gain on the CG colour (match the plate's exposure)")
       ->capture_default_str();
   cmd->add_option("--threads", a.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
+  cmd->add_option("--witness-bin", a.witness_bin,
+                  "Key and carve the witnesses at 1/N resolution (plates averaged over N x N pixels): faster, a "
+                  "little less silhouette detail; the main camera stays at full resolution")
+      ->capture_default_str();
   cmd->add_option("--props", a.props,
                   "props.json of the tagged props to track (stage \"props\"; default: the take's props.json when it "
                   "has a prop that is not fixed to the studio)");
@@ -133,6 +140,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   o.composite.depth_band_m = a.band_m;
   o.composite.cg_gain = a.cg_gain;
   o.threads = a.threads;
+  o.witness_bin = a.witness_bin;
   o.debug_layers = debug_layers;
   Rig rig = l.take->rig();
   TakeInputOptions io;
@@ -160,7 +168,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   l.loop = std::make_unique<FrameLoop>(rig, cg, o);
   if (std::optional<tracking::PropSet> props = runProps(take_dir, a, l.props_note)) {
     PropStageOptions po;
-    po.fps = takeFps(take_dir);
+    po.fps = l.take->streams().fps();
     po.tracker.threads = a.threads;
     l.props = std::make_unique<PropStage>(*l.loop, rig, std::move(*props), po);
     l.props->addTo(*l.loop);
@@ -191,9 +199,14 @@ int runRun(const RunArgs& a) {
   std::vector<int> frames;
   for (int f : l.take->frames())
     if (range.contains(f)) frames.push_back(f);
-  if (frames.empty() && a.live.empty()) throw Error("no frame of the take is in the range", fieldContext("--frames"));
+  // Live: --live NAME=SOURCE, or cameras the take names "live:..." (take/live.h).
+  bool take_live = false;
+  for (const std::string& name : l.take->streams().cameras())
+    take_live = take_live || l.take->streams().stream(name).kind == take::SourceKind::kLive;
+  const bool is_live = !a.live.empty() || take_live;
+  if (frames.empty() && !is_live) throw Error("no frame of the take is in the range", fieldContext("--frames"));
   std::unique_ptr<LiveReader> live;
-  if (!a.live.empty()) {
+  if (is_live) {
     LiveOptions lo;
     for (const std::string& item : a.live) {
       const size_t eq = item.find('=');
@@ -230,6 +243,7 @@ int runRun(const RunArgs& a) {
   std::vector<std::string> stage_order;
   double total_ms = 0;
   nlohmann::json dropped = nlohmann::json::array();
+  nlohmann::json failed = nlohmann::json::array();  // frames not composited: {"frame", "reason"}
   const Clock::time_point start = Clock::now();
   int done = 0;
   std::vector<int> ran;
@@ -242,12 +256,27 @@ int runRun(const RunArgs& a) {
       if (!live->next(s)) break;
     } else {
       if (next >= frames.size()) break;
-      l.reader->read(frames[next], s);
+      try {
+        l.reader->read(frames[next], s);
+      } catch (const Error& e) {
+        ran.push_back(frames[next]);
+        failed.push_back({{"frame", frames[next]}, {"reason", e.what()}});
+        std::cerr << "run: frame " << frames[next] << " failed: " << e.what() << "\n";
+        continue;
+      }
     }
     const int f = s.frame;
     ran.push_back(f);
     const double read_ms = msSince(t0);
-    std::vector<StageTime> times = l.loop->run(s);
+    std::vector<StageTime> times;
+    try {
+      times = l.loop->run(s);
+    } catch (const Error& e) {
+      // A frame that cannot be composited (too few witnesses, ...) is reported and skipped.
+      failed.push_back({{"frame", f}, {"reason", e.what()}});
+      std::cerr << "run: frame " << f << " failed: " << e.what() << "\n";
+      continue;
+    }
     const Clock::time_point w0 = Clock::now();
     writer.write(f, s.composite);
     writeDepthExr(out / "depth" / (stem(f) + ".exr"), s.main_depth,
@@ -294,15 +323,19 @@ int runRun(const RunArgs& a) {
     }
   }
   if (ran.empty()) throw Error("no frame was run (the live sources gave none)", fieldContext("--live"));
-  frames = ran;
+  frames.clear();
+  for (int f : ran)
+    if (std::none_of(failed.begin(), failed.end(), [&](const nlohmann::json& j) { return j["frame"] == f; }))
+      frames.push_back(f);
   writer.close();
   writeFileAtomic(out / "poses.jsonl", poses);
   writeFileAtomic(out / "run.jsonl", report);
   if (l.props) writeFileAtomic(out / "props.jsonl", prop_lines);
   nlohmann::json mean = nlohmann::json::object();
-  for (const std::string& s : stage_order) mean[s] = stage_sum[s] / frames.size();
+  for (const std::string& s : stage_order) mean[s] = frames.empty() ? 0.0 : stage_sum[s] / frames.size();
   const double fps = total_ms > 0 ? 1000.0 * frames.size() / total_ms : 0.0;
-  std::cerr << "run: " << frames.size() << " frames, " << fps << " fps (read and write included)";
+  std::cerr << "run: " << frames.size() << " frames, " << failed.size() << " failed, " << fps
+            << " fps (read and write included)";
   if (live)
     std::cerr << ", live at " << live->fps() << " fps: " << live->delivered() << " frames processed, "
               << live->dropped() << " dropped (late)";
@@ -315,6 +348,7 @@ int runRun(const RunArgs& a) {
                                 {"mean_ms", mean},
                                 {"fps", fps},
                                 {"dropped", dropped},
+                                {"failed", failed},
                                 {"props", l.props ? nlohmann::json((out / "props.jsonl").string()) : nlohmann::json()},
                                 {"live", live ? nlohmann::json{{"fps", live->fps()},
                                                                {"delivered", live->delivered()},
@@ -323,7 +357,8 @@ int runRun(const RunArgs& a) {
                      .dump()
               << "\n";
   }
-  return 0;
+  // A frame not composited is a failure, said in the exit status as `previz carve` does.
+  return failed.empty() ? 0 : 1;
 }
 
 // ---- previz bench run --------------------------------------------------------------------
@@ -351,47 +386,46 @@ std::optional<double> takeNoiseSigma(const nlohmann::json& take) {
   return options["noise_sigma"].get<double>();
 }
 
-int runBench(const BenchArgs& a) {
-  fs::path take_dir = a.take;
-  if (take_dir.empty()) {
-    // The default studio: 8 witnesses 1280x720 + main 1920x1080, rendered once and kept (one
-    // folder per --fps).
-    if (!(a.fps > 0) || !std::isfinite(a.fps))
-      throw Error("bench run: --fps must be a finite value > 0 (got " + std::to_string(a.fps) + ")",
-                  fieldContext("--fps"));
-    if (!(a.noise >= 0) || !std::isfinite(a.noise))
-      throw Error("bench run: --noise must be a finite value >= 0 (got " + std::to_string(a.noise) + ")",
-                  fieldContext("--noise"));
-    // One folder per (--fps, --noise): take, take_24fps, take_noise0, take_24fps_noise0.
-    std::string folder = "take";
-    char part[64];
-    if (a.fps != 0.5) {
-      std::snprintf(part, sizeof part, "_%gfps", a.fps);
-      folder += part;
-    }
-    if (a.noise != 2.0) {
-      std::snprintf(part, sizeof part, "_noise%g", a.noise);
-      folder += part;
-    }
-    take_dir = fs::path(a.out) / folder;
-    synth::SynthOptions so;
-    so.frames = a.frames;
-    so.fps = a.fps;  // 0.5: frames 2 s apart over the choreography (behind the pillar at 2 s)
-    so.noise_sigma = a.noise;
-    so.write_meshes = false;
-    bool have = false;
-    if (fs::exists(take_dir / "take.json")) {
-      const nlohmann::json t = readJsonFile(take_dir / "take.json");
-      have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps &&
-             takeNoiseSigma(t) == so.noise_sigma;
-    }
-    if (!have) {
-      std::cerr << "bench run: rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080, noise "
-                << so.noise_sigma << " grey levels) into "
-                << take_dir << " (once)\n";
-      synth::synthesizeTake(so, take_dir);
-    }
+// The default studio of the benchmarks: 8 witnesses 1280x720 + main 1920x1080, rendered once
+// and kept under 'out' (one folder per fps and noise: take, take_24fps, take_noise0, ...).
+fs::path defaultBenchTake(const std::string& out, int frame_count, double fps, double noise, const char* who) {
+  if (!(fps > 0) || !std::isfinite(fps))
+    throw Error(std::string(who) + ": --fps must be a finite value > 0 (got " + std::to_string(fps) + ")",
+                fieldContext("--fps"));
+  if (!(noise >= 0) || !std::isfinite(noise))
+    throw Error(std::string(who) + ": --noise must be a finite value >= 0 (got " + std::to_string(noise) + ")",
+                fieldContext("--noise"));
+  std::string folder = "take";
+  char part[64];
+  if (fps != 0.5) {
+    std::snprintf(part, sizeof part, "_%gfps", fps);
+    folder += part;
   }
+  if (noise != 2.0) {
+    std::snprintf(part, sizeof part, "_noise%g", noise);
+    folder += part;
+  }
+  const fs::path take_dir = fs::path(out) / folder;
+  synth::SynthOptions so;
+  so.frames = frame_count;
+  so.fps = fps;  // 0.5: frames 2 s apart over the choreography (behind the pillar at 2 s)
+  so.noise_sigma = noise;
+  so.write_meshes = false;
+  bool have = false;
+  if (fs::exists(take_dir / "take.json")) {
+    const nlohmann::json t = readJsonFile(take_dir / "take.json");
+    have = t.value("frames", 0) == so.frames && t.value("fps", 0.0) == so.fps && takeNoiseSigma(t) == so.noise_sigma;
+  }
+  if (!have) {
+    std::cerr << who << ": rendering the default studio (" << so.frames << " frames, 8 x 1280x720 + 1920x1080, noise "
+              << so.noise_sigma << " grey levels) into " << take_dir << " (once)\n";
+    synth::synthesizeTake(so, take_dir);
+  }
+  return take_dir;
+}
+
+int runBench(const BenchArgs& a) {
+  const fs::path take_dir = a.take.empty() ? defaultBenchTake(a.out, a.frames, a.fps, a.noise, "bench run") : fs::path(a.take);
   Loaded l = load(take_dir, a.loop, false);
   std::vector<int> frames = l.take->frames();
   if (static_cast<int>(frames.size()) > a.frames) frames.resize(a.frames);
@@ -465,7 +499,8 @@ int runBench(const BenchArgs& a) {
                       {"fps", 1000.0 / t},   {"target_ms", budget_ms}, {"largest_stage", largest},
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
-                      {"read_png_ms", median(read_ms)}, {"take", take_dir.string()}};
+                      {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
+                      {"witness_bin", a.loop.witness_bin}};
   // The plates' sensor noise, as the take records it (synthetic takes): the keyer's work grows with it.
   if (fs::exists(take_dir / "take.json")) {
     const std::optional<double> noise = takeNoiseSigma(readJsonFile(take_dir / "take.json"));
@@ -479,6 +514,109 @@ int runBench(const BenchArgs& a) {
   return 0;
 }
 
+// ---- previz bench take --------------------------------------------------------------------
+
+struct BenchTakeArgs {
+  std::string out = "out/bench_take", formats = "png,exr,ffv1,h264";
+  int frames = 8;
+  LoopArgs loop;
+};
+
+// Decoding a frame set (every camera's image of one take frame) from each form the take model
+// reads, and the frame loop with its input read from that form: one JSON line each.
+int runBenchTake(const BenchTakeArgs& a) {
+  const fs::path png = defaultBenchTake(a.out, a.frames, 24.0, 2.0, "bench take");
+  std::vector<std::pair<std::string, fs::path>> sources;
+  for (const std::string& format : splitList(a.formats)) {
+    if (format == "png") {
+      sources.push_back({format, png});
+      continue;
+    }
+    const fs::path dir = fs::path(a.out) / ("take_24fps_" + format);
+    bool have = false;
+    if (fs::exists(dir / "take.json")) {
+      const nlohmann::json j = readJsonFile(dir / "take.json");
+      have = j.value("converted_from", nlohmann::json::object()).value("format", "") == format &&
+             j.value("frames", 0) == a.frames;
+    }
+    if (!have) {
+      std::cerr << "bench take: converting the take to " << format << " (once)\n";
+      fs::remove_all(dir);
+      take::ConvertOptions co;
+      co.writer.format = format;
+      take::convertTake(png, dir, co);
+    }
+    sources.push_back({format, dir});
+  }
+  for (const auto& [format, dir] : sources) {
+    // The frame sets alone, frames in order (videos decode ahead on their worker threads).
+    const Clock::time_point t_open = Clock::now();
+    const take::Take t(dir);
+    const double open_ms = msSince(t_open);
+    std::vector<double> read_ms;
+    long long bytes = 0;
+    std::error_code ec;
+    for (const auto& e : fs::recursive_directory_iterator(dir / "cams", ec))
+      if (e.is_regular_file(ec)) bytes += static_cast<long long>(e.file_size(ec));
+    std::string size;
+    for (int f : t.frames()) {
+      const Clock::time_point t0 = Clock::now();
+      const take::FrameSet set = t.readFrameSet(f, t.cameras());
+      read_ms.push_back(msSince(t0));
+      if (set.usable() != static_cast<int>(t.cameras().size()))
+        throw Error("bench take: a camera of frame " + std::to_string(f) + " did not read", fileContext(dir.string()));
+    }
+    const double first_ms = read_ms.front();
+    // The loop with its input read from the form each frame: decode of frame N + 1 overlaps the
+    // processing of frame N where the form decodes ahead (videos).
+    // Frame 0 warms the loop up (screen models, ray tables); frames 1.. are timed.
+    Loaded l = load(dir, a.loop, false);
+    const std::vector<int> frames = l.take->frames();
+    {
+      FrameState warm;
+      l.reader->read(frames.front(), warm);
+      l.loop->run(warm);
+    }
+    std::vector<double> frame_ms, loop_read_ms;
+    const Clock::time_point t_loop = Clock::now();
+    for (size_t i = 1; i < frames.size(); ++i) {
+      const Clock::time_point t0 = Clock::now();
+      FrameState s;
+      l.reader->read(frames[i], s);
+      loop_read_ms.push_back(msSince(t0));
+      l.loop->run(s);
+      frame_ms.push_back(msSince(t0));
+    }
+    const double loop_ms = msSince(t_loop);
+    const Camera& main = l.take->rig().at(l.loop->mainCamera()).camera;
+    const Camera& w0 = l.take->rig().at(l.loop->carveCameras().front()).camera;
+    size = std::to_string(l.loop->carveCameras().size()) + "x" + std::to_string(w0.width) + "x" +
+           std::to_string(w0.height) + "+" + std::to_string(main.width) + "x" + std::to_string(main.height);
+    std::cout << nlohmann::json{{"stage", "read_frameset"},
+                                {"source", format},
+                                {"size", size},
+                                {"frames", read_ms.size()},
+                                {"ms", median(read_ms)},
+                                {"ms_first", first_ms},
+                                {"open_ms", open_ms},
+                                {"mb_per_frameset", bytes / 1e6 / std::max<size_t>(1, read_ms.size())},
+                                {"threads", omp_get_max_threads()}}
+                     .dump()
+              << "\n";
+    std::cout << nlohmann::json{{"stage", "loop_with_read"},
+                                {"source", format},
+                                {"size", size},
+                                {"frames", frame_ms.size()},
+                                {"ms", median(frame_ms)},
+                                {"read_ms", median(loop_read_ms)},
+                                {"fps", 1000.0 * frame_ms.size() / loop_ms},
+                                {"threads", omp_get_max_threads()}}
+                     .dump()
+              << "\n";
+  }
+  return 0;
+}
+
 }  // namespace
 
 Runner addRunCommand(CLI::App& app) {
@@ -486,7 +624,7 @@ Runner addRunCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "run", "The live previz frame over a take: key -> carve -> main-view depth -> track props -> composite "
              "(docs/formats.md, \"Run output\")");
-  cmd->add_option("--take", a->take, "Take folder (cams/<cam>/%06d.png, cg/)")->required();
+  cmd->add_option("--take", a->take, "Take folder (cams/: a sequence or video per camera, cg/; docs/formats.md \"Take folder\")")->required();
   cmd->add_option("--out", a->out, "Output folder")->required();
   addLoopOptions(cmd, a->loop, false);
   cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
@@ -525,7 +663,15 @@ Runner addBenchCommand(CLI::App& app) {
       ->capture_default_str();
   addLoopOptions(cmd, a->loop, false);
   cmd->add_flag("--json", a->json, "JSON on stdout (always written; kept for uniformity)");
-  return [a]() { return runBench(*a); };
+  auto bt = std::make_shared<BenchTakeArgs>();
+  CLI::App* take_cmd = bench->add_subcommand(
+      "take", "Decoding the cameras' streams: ms per frame set (every camera's image of a frame) from PNG, EXR, "
+              "FFV1 and H.264 forms of the default studio at 24 fps, and the frame loop's fps reading each");
+  take_cmd->add_option("--out", bt->out, "Where the takes are kept")->capture_default_str();
+  take_cmd->add_option("--frames", bt->frames, "Frames of the take")->capture_default_str();
+  take_cmd->add_option("--formats", bt->formats, "Forms compared (take convert --format)")->capture_default_str();
+  addLoopOptions(take_cmd, bt->loop, false);
+  return [a, cmd, take_cmd, bt]() { return take_cmd->parsed() ? runBenchTake(*bt) : runBench(*a); };
 }
 
 }  // namespace previz::app

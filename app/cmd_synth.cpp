@@ -1,7 +1,9 @@
 // previz synth: render a synthetic take (studio, intrinsics or rig preset) with ground truth.
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <sstream>
+#include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -26,6 +28,7 @@ struct SynthArgs {
   bool no_meshes = false;
   bool no_floor = false;
   std::vector<std::string> delays;
+  std::vector<std::string> lates;
   std::vector<std::string> bumps;
   std::uint64_t board_seed = 0;
   CLI::Option* board_seed_option = nullptr;
@@ -46,20 +49,6 @@ std::pair<std::string, std::string> splitNamed(const std::string& text, const st
   return {text.substr(0, eq), text.substr(eq + 1)};
 }
 
-// --delay NAME=FRAMES
-void parseDelay(const std::string& text, synth::SynthOptions& o) {
-  const std::string form = "NAME=FRAMES, e.g. witness03=2";
-  const auto [name, value] = splitNamed(text, "--delay", form);
-  int frames = 0;
-  try {
-    size_t used = 0;
-    frames = std::stoi(value, &used);
-    if (used != value.size()) throw std::invalid_argument(value);
-  } catch (const std::exception&) {
-    badFlag("--delay", "expected " + form + " (got '" + text + "')");
-  }
-  o.delay_frames[name] = frames;
-}
 
 // --bump NAME=DX,DY,DZ,RX,RY,RZ: metres and a rotation vector in degrees, both in the camera's
 // own frame (x right, y down, z forward): T_world_cam' = T_world_cam * bump.
@@ -117,8 +106,22 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_flag("--static-main", args->static_main, "Keep the main camera fixed (no dolly move)");
   cmd->add_flag("--no-meshes", args->no_meshes, "Do not write truth/mesh/actor.*");
   cmd->add_option("--delay", args->delays,
-                  "Rig preset: NAME=FRAMES, camera NAME's frame f shows the board of frame f - FRAMES "
-                  "(repeatable)");
+                  "Rig and studio presets: NAME=FRAMES, camera NAME is out of sync: its frame f shows frame "
+                  "f - FRAMES (repeatable)");
+  cmd->add_option("--format", o.camera_format,
+                  "Studio preset: the cameras' streams: png|jpg|png16|tif16|exr (sequences; exr float linear) or "
+                  "ffv1|h264|prores (videos cams/<cam>.mkv|.mp4|.mov)")
+      ->capture_default_str();
+  cmd->add_option("--pattern", o.sequence_pattern,
+                  "Studio preset: sequence file pattern ({camera}, %04d or ####; default %06d)");
+  cmd->add_option("--start-number", o.sequence_start, "Studio preset: number of a sequence's first file (VFX: 1001)")
+      ->capture_default_str();
+  cmd->add_option("--timecode", o.start_timecode,
+                  "Studio preset: timecode of take frame 0, HH:MM:SS:FF, written where the form carries one "
+                  "(EXR timeCode, the video container)");
+  cmd->add_option("--late", args->lates,
+                  "Studio preset: NAME=FRAMES, camera NAME started recording FRAMES frames late (its stream "
+                  "begins there; its timecode or take.json \"offsets\" says so; repeatable)");
   cmd->add_option("--bump", args->bumps,
                   "Rig preset: NAME=DX,DY,DZ,RX,RY,RZ, camera NAME truly stands at T_world_cam * bump "
                   "(metres; rotation vector in degrees; camera frame; repeatable)");
@@ -134,7 +137,14 @@ Runner addSynthCommand(CLI::App& app) {
     o.preset = synth::presetFromString(args->preset);
     o.main_dolly = !args->static_main;
     o.write_meshes = !args->no_meshes;
-    for (const std::string& d : args->delays) parseDelay(d, o);
+    for (const std::string& d : args->delays) {
+      const auto [name, frames] = parseNamedInt(d, "--delay");
+      o.delay_frames[name] = frames;
+    }
+    for (const std::string& d : args->lates) {
+      const auto [name, frames] = parseNamedInt(d, "--late");
+      o.late_frames[name] = frames;
+    }
     for (const std::string& b : args->bumps) parseBump(b, o);
     if (args->board_seed_option->count() > 0) o.board_seed = args->board_seed;
     o.floor_frames = !args->no_floor;

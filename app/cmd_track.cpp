@@ -154,6 +154,7 @@ int runTrack(const TrackArgs& a) {
     line->update(done);
   });
   for (const std::string& f : s.camera_failures) std::cerr << "track: " << f << "\n";
+  for (int f : s.failed_frames) std::cerr << "track: frame " << f << " failed: no camera has an image\n";
   const double fps = s.ms > 0 ? 1000.0 * s.frames / s.ms : 0;
   std::cerr << "track: " << s.frames << " frames from " << s.cameras.size() << " cameras, " << s.full_frames
             << " full-frame searches (" << s.rescanned_frames << " after a missed prediction), " << s.unknown_tags << " tags of no prop ignored, "
@@ -185,6 +186,7 @@ int runTrack(const TrackArgs& a) {
                       {"full_frames", s.full_frames},
                       {"rescanned_frames", s.rescanned_frames},
                       {"camera_failures", s.camera_failures},
+                      {"failed_frames", s.failed_frames},
                       {"ms", s.ms},
                       {"track_ms_per_frame", s.frames ? s.track_ms / s.frames : 0},
                       {"udp", a.udp.empty() ? nlohmann::json(nullptr) : nlohmann::json(a.udp)},
@@ -194,7 +196,7 @@ int runTrack(const TrackArgs& a) {
   // Frame files: shards share the folder, so the summary is only printed (--json).
   if (!a.frame_files) writeJsonAtomic(std::filesystem::path(a.out) / "track.json", j);
   if (a.json) std::cout << j.dump() << "\n";
-  return 0;
+  return s.failed_frames.empty() ? 0 : 1;
 }
 
 int runProp(const PropArgs& a) {
@@ -315,7 +317,7 @@ Runner addTrackCommand(CLI::App& app) {
       "track", "Track AprilTag-tagged props from every camera; JSON lines per frame, FreeD / OpenTrackIO over UDP "
                "(docs/formats.md, \"Tracking\")");
   cmd->require_subcommand(0, 1);
-  cmd->add_option("--take", a->take, "Take folder (cams/<camera>/%06d.png)");
+  cmd->add_option("--take", a->take, "Take folder (cams/: a sequence or video per camera; docs/formats.md \"Take folder\")");
   cmd->add_option("--rig", a->rig, "rig.json (cameras and their poses)");
   cmd->add_option("--props", a->props, "props.json (docs/formats.md)");
   cmd->add_option("--out", a->out, "Output folder: poses.jsonl, track.json");
@@ -370,7 +372,7 @@ Runner addTrackCommand(CLI::App& app) {
   prop->add_flag("--json", p->json, "Print a JSON summary on stdout");
 
   CLI::App* cam = cmd->add_subcommand("camera", "Track one camera's pose per frame from studio tags fixed in the world");
-  cam->add_option("--take", c->take, "Take folder (cams/<camera>/%06d.png)")->required();
+  cam->add_option("--take", c->take, "Take folder (cams/: a sequence or video per camera; docs/formats.md \"Take folder\")")->required();
   cam->add_option("--rig", c->rig, "rig.json (the camera's intrinsics)")->required();
   cam->add_option("--tags", c->tags, "props.json whose props carry T_world_prop (studio tags)")->required();
   cam->add_option("--camera", c->camera, "Camera to track")->capture_default_str();

@@ -25,5 +25,7 @@ Runner addRunCommand(CLI::App& app);
 // `previz bench run` (the bench command with its verbs).
 Runner addBenchCommand(CLI::App& app);
 Runner addBatchCommand(CLI::App& app);
+// `previz take info | convert` (take/take.h).
+Runner addTakeCommand(CLI::App& app);
 
 }  // namespace previz::app

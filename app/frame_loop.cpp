@@ -5,12 +5,12 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <chrono>
 #include <cmath>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
@@ -36,13 +36,70 @@ void FrameLoopOptions::validate() const {
   keyer.validate();
   composite.validate();
   if (threads < 0) throw Error("run: threads must be >= 0", fieldContext("threads"));
+  if (witness_bin < 1 || witness_bin > 8)
+    throw Error("run: witness_bin must be in [1, 8] (got " + std::to_string(witness_bin) + ")",
+                fieldContext("witness_bin"));
 }
+
+namespace {
+
+// bin x bin pixels of an 8-bit sRGB image averaged as light into dst (size: the scaled camera's,
+// Camera::scaled; a block past the image's edge repeats its last row / column). A sensor bins
+// light, not codes: the mean of the codes is darker than the mean of the light on every mixed
+// pixel of bright screen and dark costume, and the key would read them as more foreground than
+// they are (a wider silhouette, a hull nearer the camera). Light is taken as code^2 (gamma 2,
+// against sRGB's ~2.2: a half-and-half block of codes 150 and 40 gives 110, sRGB's exact mean
+// 112, the code mean 95), which keeps it to integer arithmetic that vectorises; a uniform block
+// gives its own code back exactly.
+void binLight(const cv::Mat& src, int bin, cv::Size size, cv::Mat& dst) {
+  // round(sqrt(m)) for every mean of squared codes m (<= 255^2).
+  static const std::vector<std::uint8_t> root = [] {
+    std::vector<std::uint8_t> t(65536);
+    for (int m = 0; m < 65536; ++m) t[m] = static_cast<std::uint8_t>(std::min(255L, std::lround(std::sqrt(m))));
+    return t;
+  }();
+  dst.create(size, CV_8UC3);
+  const int area = bin * bin;
+  const int n = 3 * src.cols;
+  // Plate columns past the last whole block repeat the last one; a binned size rounded down
+  // leaves plate columns no block reads, so the buffer holds whichever is longer.
+  std::vector<std::uint32_t> acc(std::max<size_t>(n, static_cast<size_t>(3) * size.width * bin));
+  for (int y = 0; y < size.height; ++y) {
+    // Squared codes summed down the block's rows (contiguous: the compiler vectorises it).
+    std::uint32_t* a = acc.data();
+    std::fill(a, a + n, 0u);
+    for (int k = 0; k < bin; ++k) {
+      const std::uint8_t* p = src.ptr<std::uint8_t>(std::min(y * bin + k, src.rows - 1));
+      for (int i = 0; i < n; ++i) a[i] += static_cast<std::uint32_t>(p[i]) * p[i];
+    }
+    for (int i = n; i < static_cast<int>(acc.size()); ++i) a[i] = a[i - 3];  // repeat the last column
+    std::uint8_t* o = dst.ptr<std::uint8_t>(y);
+    for (int x = 0; x < size.width; ++x) {
+      const std::uint32_t* q = a + 3 * bin * x;
+      std::uint32_t b = 0, g = 0, r = 0;
+      for (int j = 0; j < bin; ++j, q += 3) {
+        b += q[0];
+        g += q[1];
+        r += q[2];
+      }
+      o[3 * x] = root[(b + area / 2) / area];
+      o[3 * x + 1] = root[(g + area / 2) / area];
+      o[3 * x + 2] = root[(r + area / 2) / area];
+    }
+  }
+}
+
+}  // namespace
 
 struct FrameLoop::Impl {
   FrameLoopOptions options;
   std::vector<std::string> carve_names;
   std::string main_name;
   std::vector<carving::Keyer> keyers;  // carving cameras, then main
+  // witness_bin > 1: each carving camera's plate size (the rig's) and its binned size (the
+  // scaled camera's), and the binned plate, reused frame after frame.
+  std::vector<cv::Size> plate_sizes, binned_sizes;
+  std::vector<cv::Mat> binned;
   std::unique_ptr<carving::Carver> carver;
   std::unique_ptr<composite::Compositor> compositor;
   std::vector<std::pair<std::string, StageFn>> stages;
@@ -71,7 +128,7 @@ struct FrameLoop::Impl {
             s.dropped[i] = "no frame";
             continue;
           }
-          s.silhouettes[i] = keyers[i].key(s.witness_plates[i], carve_names[i]).silhouette;
+          s.silhouettes[i] = keyers[i].key(witnessPlate(s, i), carve_names[i]).silhouette;
         } else {
           s.main_key = keyers[n].key(s.main_plate, main_name);
           s.foreground = carving::despill(s.main_plate, s.main_key, keyers[n].screen(), keyers[n].options());
@@ -89,7 +146,31 @@ struct FrameLoop::Impl {
     }
   }
 
+  // The plate keyed for carving camera i: the frame itself, or binned to the scaled camera. A
+  // plate of another size than the rig's is an error (resizing would hide it).
+  const cv::Mat& witnessPlate(const FrameState& s, int i) {
+    const cv::Mat& plate = s.witness_plates[i];
+    if (options.witness_bin == 1) return plate;
+    if (plate.size() != plate_sizes[i])
+      throw Error("plate is " + std::to_string(plate.cols) + "x" + std::to_string(plate.rows) + " but the camera is " +
+                  std::to_string(plate_sizes[i].width) + "x" + std::to_string(plate_sizes[i].height));
+    binLight(plate, options.witness_bin, binned_sizes[i], binned[i]);
+    return binned[i];
+  }
+
   void carve(FrameState& s) {
+    // Fewer usable witnesses than the hull needs: the frame fails (an empty hull would put the
+    // whole actor in front of the CG without a word).
+    int usable = 0;
+    std::string why;
+    for (size_t i = 0; i < s.dropped.size(); ++i) {
+      if (s.dropped[i].empty()) ++usable;
+      else why += (why.empty() ? "" : "; ") + carve_names[i] + ": " + s.dropped[i];
+    }
+    if (usable < options.hull.min_views)
+      throw Error("only " + std::to_string(usable) + " of " + std::to_string(s.dropped.size()) +
+                  " witnesses usable, the hull needs " + std::to_string(options.hull.min_views) +
+                  (why.empty() ? std::string() : " (" + why + ")"));
     carving::Silhouettes sil;
     sil.masks = s.silhouettes;
     sil.dropped = s.dropped;
@@ -138,6 +219,17 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
   carving::KeyerOptions witness_key = options.keyer;
   witness_key.soft_alpha = false;  // carving needs the silhouette only
   witness_key.threads = 1;         // cameras are keyed in parallel
+  if (const int bin = options.witness_bin; bin > 1) {
+    const int area = bin * bin;
+    witness_key.min_blob_px = std::max(1, witness_key.min_blob_px / area);
+    witness_key.min_hole_px = std::max(1, witness_key.min_hole_px / area);
+    for (RigCamera& rc : carve_cams) {
+      m.plate_sizes.emplace_back(rc.camera.width, rc.camera.height);
+      rc.camera = rc.camera.scaled(1.0 / bin, 1.0 / bin);
+      m.binned_sizes.emplace_back(rc.camera.width, rc.camera.height);
+    }
+    m.binned.resize(carve_cams.size());
+  }
   for (size_t i = 0; i < m.carve_names.size(); ++i) m.keyers.emplace_back(witness_key);
   carving::KeyerOptions main_key = options.keyer;
   main_key.soft_alpha = true;
@@ -312,7 +404,7 @@ void TakeReader::read(int frame, FrameState& s) const {
     ErrorContext c;
     c.camera = main_name_;
     c.frame = frame;
-    c.file = take_.framePath(main_name_, frame).string();
+    c.file = take_.source(main_name_, frame);
     throw Error("main plate unusable: " + (errors[n].empty() ? frames[n].dropped : errors[n]), c);
   }
   s.main_plate = frames[n].image;
@@ -327,8 +419,7 @@ void TakeReader::readCg(int frame, FrameState& s) const {
 }
 
 struct LiveReader::Source {
-  std::string camera, uri;
-  cv::VideoCapture capture;
+  std::unique_ptr<take::LiveStream> stream;
 };
 
 LiveReader::LiveReader(const FrameLoop& loop, const TakeReader& take, const LiveOptions& options)
@@ -336,25 +427,24 @@ LiveReader::LiveReader(const FrameLoop& loop, const TakeReader& take, const Live
   std::vector<std::string> names = loop.carveCameras();
   names.push_back(loop.mainCamera());
   for (const std::string& name : names) {
-    ErrorContext c;
-    c.camera = name;
-    c.field = "--live";
-    const auto it = options.sources.find(name);
-    if (it == options.sources.end()) throw Error("live: no source for this camera (NAME=SOURCE)", c);
-    auto src = std::make_unique<Source>();
-    src->camera = name;
-    src->uri = it->second;
-    const bool index = !it->second.empty() && it->second.find_first_not_of("0123456789") == std::string::npos;
-    const bool opened = index ? src->capture.open(std::stoi(it->second))
-                              : src->capture.open(it->second, it->second.find('!') != std::string::npos
-                                                                  ? cv::CAP_GSTREAMER : cv::CAP_ANY);
-    if (!opened) {
-      c.file = it->second;
-      throw Error("live: cannot open the source", c);
+    // --live NAME=SOURCE first, else the take's own "live:" source (take.json "sources").
+    std::string uri;
+    if (const auto it = options.sources.find(name); it != options.sources.end()) {
+      uri = it->second;
+    } else if (const take::Take& streams = take.take().streams();
+               streams.has(name) && streams.stream(name).kind == take::SourceKind::kLive) {
+      uri = streams.stream(name).path.string();
+    } else {
+      ErrorContext c;
+      c.camera = name;
+      c.field = "--live";
+      throw Error("live: no source for this camera (--live NAME=SOURCE, or take.json \"sources\": \"live:...\")", c);
     }
+    auto src = std::make_unique<Source>();
+    src->stream = std::make_unique<take::LiveStream>(name, uri);
     sources_.push_back(std::move(src));
   }
-  fps_ = options.fps > 0 ? options.fps : sources_.back()->capture.get(cv::CAP_PROP_FPS);
+  fps_ = options.fps > 0 ? options.fps : sources_.back()->stream->fps();
   if (!(fps_ > 0) || !std::isfinite(fps_)) fps_ = 24;
 }
 
@@ -371,7 +461,7 @@ bool LiveReader::next(FrameState& s) {
     const int now_frame = static_cast<int>(elapsed_s * fps_);
     while (next_frame_ < now_frame) {
       for (auto& src : sources_)
-        if (!src->capture.grab()) return false;
+        if (!src->stream->grab()) return false;
       ++next_frame_;
       ++dropped_;
     }
@@ -379,7 +469,7 @@ bool LiveReader::next(FrameState& s) {
   const int n = static_cast<int>(sources_.size()) - 1;
   std::vector<cv::Mat> images(n + 1);
   for (int i = 0; i <= n; ++i)
-    if (!sources_[i]->capture.read(images[i]) || images[i].empty()) return false;
+    if (!sources_[i]->stream->read(images[i]) || images[i].empty()) return false;
   s.witness_plates.assign(images.begin(), images.begin() + n);
   s.dropped.assign(n, "");
   s.main_plate = images[n];
@@ -387,15 +477,6 @@ bool LiveReader::next(FrameState& s) {
   ++next_frame_;
   ++delivered_;
   return true;
-}
-
-double takeFps(const std::filesystem::path& take_dir) {
-  const std::filesystem::path tj = take_dir / "take.json";
-  if (std::filesystem::exists(tj)) {
-    const nlohmann::json j = readJsonFile(tj);
-    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
-  }
-  return 24.0;
 }
 
 }  // namespace previz::app

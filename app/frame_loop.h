@@ -28,6 +28,7 @@
 #include "carving/hull.h"
 #include "carving/keyer.h"
 #include "carving/take.h"
+#include "take/live.h"
 #include "composite/compositor.h"
 #include "composite/output.h"
 #include "core/rig.h"
@@ -57,6 +58,16 @@ struct FrameLoopOptions {
   std::string main_camera;                  // "" = the rig's camera with role "main"
   std::vector<std::string> carve_cameras;   // empty = every witness
   bool debug_layers = false;                // fill CompositeResult's layers
+  // Witness plates are averaged over witness_bin x witness_bin pixels before keying, in light
+  // taken as code^2 (a gamma-2 stand-in for sRGB, close enough for a mean and table-free), as a
+  // sensor bins; the hull is carved against those smaller silhouettes through the witness
+  // cameras scaled to match (Camera::scaled; the lens's distortion is the same in normalised
+  // coordinates). 1 = full resolution. Live preview trades a little silhouette detail for time:
+  // at 2 a witness keys a quarter of the pixels with half the sensor noise. The main camera is
+  // always keyed and composited at full resolution, and props are tracked on the full plates.
+  // The witness keyers' speck / hole sizes (KeyerOptions min_blob_px, min_hole_px, in full
+  // pixels) are divided by witness_bin^2.
+  int witness_bin = 1;
   int threads = 0;                          // OpenMP threads (0 = default)
   void validate() const;                    // throws Error naming the field
 };
@@ -131,8 +142,6 @@ struct PropStageOptions {
   void validate() const;  // throws Error naming the field
 };
 
-// The take's frame rate (take.json "fps"; 24 when absent): the props stage's clock.
-double takeFps(const std::filesystem::path& take_dir);
 
 class PropStage {
  public:
@@ -181,6 +190,7 @@ class TakeReader {
   void read(int frame, FrameState& s) const;
   // The CG frame and the main camera of a frame whose plates came from elsewhere (live).
   void readCg(int frame, FrameState& s) const;
+  const carving::Take& take() const { return take_; }
 
  private:
   const carving::Take& take_;
@@ -191,8 +201,9 @@ class TakeReader {
   std::map<int, Pose> tracked_;
 };
 
-// Live input through OpenCV VideoCapture: one source per camera (a device index "0", a file,
-// or a GStreamer pipeline string), read in lock step; frame k of every source is frame k of the
+// Live input (take/live.h): one source per camera (a device index "0", a file, a network
+// stream, or a GStreamer pipeline string; --live NAME=SOURCE, else the take's "live:" source in
+// take.json "sources"), read in lock step; frame k of every source is frame k of the
 // take (CG frame, main pose). With pacing the loop never falls behind: before each frame, every
 // source is advanced to the frame the clock says the cameras are at now (fps), and the frames
 // skipped are counted as dropped. Without pacing (files, tests) every frame is processed.

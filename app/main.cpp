@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
     runners[app.get_subcommand(name)] = std::move(runner);
   };
   add("synth", previz::app::addSynthCommand);
+  add("take", previz::app::addTakeCommand);
   add("camera", previz::app::addCameraCommand);
   add("calib", previz::app::addCalibCommand);
   add("carve", previz::app::addCarveCommand);

@@ -27,6 +27,20 @@ inline std::pair<int, int> parseSize(const std::string& text, const std::string&
               fieldContext(flag));
 }
 
+// "NAME=INTEGER" (e.g. "witness03=2") -> (NAME, INTEGER); throws Error naming the flag otherwise.
+inline std::pair<std::string, int> parseNamedInt(const std::string& text, const std::string& flag) {
+  const auto eq = text.find('=');
+  if (eq != std::string::npos && eq > 0 && eq + 1 < text.size()) {
+    try {
+      size_t used = 0;
+      const int value = std::stoi(text.substr(eq + 1), &used);
+      if (used == text.size() - eq - 1) return {text.substr(0, eq), value};
+    } catch (const std::exception&) {
+    }
+  }
+  throw Error("expected NAME=INTEGER, e.g. witness03=2 (got '" + text + "')", fieldContext(flag));
+}
+
 // "a,b,,c" -> {a, b, c}: the non-empty items between the separators.
 inline std::vector<std::string> splitList(const std::string& text, char sep = ',') {
   std::vector<std::string> out;

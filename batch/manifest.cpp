@@ -12,38 +12,12 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "take/take.h"
 
 namespace previz::batch {
 namespace fs = std::filesystem;
 
 namespace {
-
-// Frames of a take as carving/take.cpp finds them: every cams/<camera>/%06d.png of a rig
-// camera, and 0 .. frames-1 of take.json. The task checks that `previz carve` selected the
-// same frames, so a difference cannot pass unnoticed.
-std::vector<int> takeFrames(const fs::path& dir, const Rig& rig) {
-  std::set<int> frames;
-  std::error_code ec;
-  for (const RigCamera& rc : rig.cameras) {
-    const fs::path cam = dir / "cams" / rc.camera.name;
-    if (!fs::is_directory(cam, ec)) continue;
-    for (const auto& entry : fs::directory_iterator(cam, ec)) {
-      const fs::path& p = entry.path();
-      const std::string stem = p.stem().string();
-      if (p.extension() != ".png" || stem.empty() || stem.size() > 9) continue;
-      if (!std::all_of(stem.begin(), stem.end(), [](unsigned char c) { return std::isdigit(c); }))
-        continue;
-      frames.insert(std::stoi(stem));
-    }
-  }
-  const fs::path take_json = dir / "take.json";
-  if (fs::is_regular_file(take_json, ec)) {
-    const nlohmann::json j = readJsonFile(take_json);
-    if (j.contains("frames") && j["frames"].is_number_integer())
-      for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(f);
-  }
-  return {frames.begin(), frames.end()};
-}
 
 // Every regular file under a folder, sorted (so the inputs list is reproducible).
 void listFiles(const fs::path& dir, std::vector<fs::path>& files) {
@@ -298,9 +272,16 @@ Manifest planBatch(const PlanOptions& options) {
       throw Error("two takes share the folder name '" + t.name + "' (" + names[t.name].string() +
                       "); names must be unique in a batch", fileContext(t.dir));
     names[t.name] = t.dir;
-    t.frames = takeFrames(t.dir, rig);
+    take::TakeOptions streams;
+    for (const RigCamera& rc : rig.cameras) streams.cameras.push_back(rc.camera.name);
+    const take::Take streams_of(t.dir, streams);
+    // The frames `previz carve` selects (carving/take.cpp reads the take through the same model);
+    // the task checks that they agree, so a difference cannot pass unnoticed.
+    t.frames = streams_of.frames();
     if (t.frames.empty())
-      throw Error("no frames: expected cams/<camera>/%06d.png for the rig's cameras", fileContext(t.dir));
+      throw Error("no frames: no rig camera has a readable stream (take/take.h: cams/<camera>/ sequences, "
+                  "cams/<camera>.mkv|.mov|..., take.json \"sources\")",
+                  fileContext(t.dir));
     for (const RigCamera& rc : rig.cameras)
       if (rc.role == "main") t.main_camera = rc.camera.name;
     if (!t.main_camera.empty()) t.depth_cameras = depth_cameras;
@@ -313,6 +294,19 @@ Manifest planBatch(const PlanOptions& options) {
     t.work = fs::path("work") / t.name;
     // What the stages read: plates, clean plates, the take's own description.
     listFiles(t.dir / "cams", input_files);
+    // Streams take.json places outside cams/ (a folder or file elsewhere).
+    const fs::path cams = t.dir / "cams";
+    for (const std::string& name : streams_of.cameras()) {
+      const take::CameraStream& s = streams_of.stream(name);
+      if (s.kind == take::SourceKind::kNone) continue;
+      const fs::path rel = s.path.lexically_relative(cams);
+      if (!rel.empty() && *rel.begin() != "..") continue;
+      if (s.kind == take::SourceKind::kSequence) {
+        for (long long f : s.source_frames) input_files.push_back(s.path / s.pattern.fileName(f));
+      } else {
+        input_files.push_back(s.path);
+      }
+    }
     listFiles(t.dir / "clean", input_files);
     if (fs::is_regular_file(t.dir / "take.json", ec)) input_files.push_back(t.dir / "take.json");
     m.takes.push_back(std::move(t));

@@ -209,6 +209,9 @@ struct CarveJob::Impl {
   // Carve cameras, then the depth camera and the extra depth cameras not among them.
   std::vector<std::string> input_names;
   std::vector<Keyer> keyers;             // one per input camera, kept across frames
+  // Per input camera: why it is dropped for the whole take ("" = used), e.g. a clean plate the
+  // keyer cannot use (another size, unreadable): the camera is left out, the take goes on.
+  std::vector<std::string> unusable;
   std::unique_ptr<Carver> carver;
   nlohmann::json config;                 // what a finished frame's report must match
 
@@ -232,6 +235,10 @@ struct CarveJob::Impl {
     const int threads = options.hull.threads > 0 ? options.hull.threads : omp_get_max_threads();
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (int i = 0; i < n; ++i) {
+      if (!unusable[i].empty()) {
+        in.dropped[i] = unusable[i];
+        continue;
+      }
       try {
         const CameraFrame input = take.read(input_names[i], frame);
         if (!input.ok()) {
@@ -245,7 +252,7 @@ struct CarveJob::Impl {
           }
         } else {
           if (options.refine_depth) in.plates[i] = input.image;
-          const std::string source = take.framePath(input_names[i], frame).string();
+          const std::string source = take.source(input_names[i], frame);
           in.silhouettes[i] = keyers[i].key(input.image, source).silhouette;
         }
       } catch (const std::exception& e) {
@@ -435,11 +442,17 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
     if (std::find(m.input_names.begin(), m.input_names.end(), name) == m.input_names.end())
       m.input_names.push_back(name);
 
+  m.unusable.assign(m.input_names.size(), "");
   if (!take.hasMasks()) {
-    for (const std::string& name : m.input_names) {
+    for (size_t i = 0; i < m.input_names.size(); ++i) {
+      const std::string& name = m.input_names[i];
       m.keyers.emplace_back(m.options.keyer);
-      const cv::Mat clean = take.cleanPlate(name);
-      if (!clean.empty()) m.keyers.back().setCleanPlate(clean, take.cleanPlatePath(name).string());
+      try {
+        const cv::Mat clean = take.cleanPlate(name);
+        if (!clean.empty()) m.keyers.back().setCleanPlate(clean, "clean plate of " + name);
+      } catch (const Error& e) {
+        m.unusable[i] = std::string("clean plate unusable: ") + e.what();
+      }
     }
   }
 
@@ -553,6 +566,21 @@ FrameReport CarveJob::runFrame(int frame) {
     } else {
       report.cameras_dropped.push_back({m.input_names[i], in.dropped[i]});
     }
+  }
+  // A hull from fewer cameras than min_views is empty: the frame failed, it is not carved.
+  int carving_usable = 0;
+  std::string why;
+  for (size_t i = 0; i < m.carve_names.size(); ++i) {
+    if (in.dropped[i].empty()) ++carving_usable;
+    else why += (why.empty() ? "" : "; ") + m.carve_names[i] + ": " + in.dropped[i];
+  }
+  if (carving_usable < m.options.hull.min_views) {
+    ErrorContext c;
+    c.frame = frame;
+    throw Error("only " + std::to_string(carving_usable) + " of " + std::to_string(m.carve_names.size()) +
+                    " carving cameras usable, the hull needs " + std::to_string(m.options.hull.min_views) +
+                    (why.empty() ? std::string() : " (" + why + ")"),
+                c);
   }
 
   const Clock::time_point t1 = Clock::now();

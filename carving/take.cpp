@@ -34,8 +34,8 @@ std::string frameName(int frame) {
   return name;
 }
 
-// Frame numbers of the %06d.png files in a folder (names that are all digits).
-void collectFrames(const fs::path& dir, std::set<int>& frames) {
+// Frame numbers of the %06d.png mattes in a folder (names that are all digits).
+void collectMaskFrames(const fs::path& dir, std::set<int>& frames) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -103,51 +103,60 @@ Take::Take(const TakeSource& source) : source_(source) {
   }
   if (rig_.cameras.empty()) throw Error("the rig has no cameras", context(source_.rig_path));
 
-  std::set<int> frames;
-  for (const RigCamera& rc : rig_.cameras) {
-    collectFrames(source_.take_dir / "cams" / rc.camera.name, frames);
-    if (hasMasks()) collectFrames(source_.masks_dir / rc.camera.name, frames);
-  }
+  take::TakeOptions streams;
+  for (const RigCamera& rc : rig_.cameras) streams.cameras.push_back(rc.camera.name);
+  streams_ = std::make_shared<const take::Take>(source_.take_dir, streams);
+  std::set<int> frames(streams_->frames().begin(), streams_->frames().end());
+  if (hasMasks())
+    for (const RigCamera& rc : rig_.cameras) collectMaskFrames(source_.masks_dir / rc.camera.name, frames);
+  const nlohmann::json& j = streams_->takeJson();
   const fs::path take_json = source_.take_dir / "take.json";
-  if (fs::is_regular_file(take_json, ec)) {
-    const nlohmann::json j = readJsonFile(take_json);
-    if (j.contains("frames") && j["frames"].is_number_integer())
-      for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(f);
-    if (j.contains("camera_gains") && j["camera_gains"].is_object())
-      for (const auto& [name, g] : j["camera_gains"].items()) {
-        if (!g.is_number() || !(g.get<double>() > 0))
-          throw Error("camera_gains: the gain of '" + name + "' must be a number > 0",
-                      context(take_json, "camera_gains"));
-        gains_[name] = g.get<double>();
-      }
-  }
+  if (j.contains("camera_gains") && j["camera_gains"].is_object())
+    for (const auto& [name, g] : j["camera_gains"].items()) {
+      if (!g.is_number() || !(g.get<double>() > 0))
+        throw Error("camera_gains: the gain of '" + name + "' must be a number > 0",
+                    context(take_json, "camera_gains"));
+      gains_[name] = g.get<double>();
+    }
   frames_.assign(frames.begin(), frames.end());
-  if (frames_.empty())
-    throw Error("no frames: expected cams/<camera>/%06d.png for the rig's cameras (" +
-                    std::to_string(rig_.cameras.size()) + " cameras, first '" +
-                    rig_.cameras.front().camera.name + "')" +
-                    (hasMasks() ? " or <masks>/<camera>/%06d.png" : ""),
+  bool live = false;  // live cameras have no frames on disk (take/live.h)
+  for (const RigCamera& rc : rig_.cameras) live = live || streams_->stream(rc.camera.name).kind == take::SourceKind::kLive;
+  if (frames_.empty() && !live) {
+    std::string why;
+    for (const RigCamera& rc : rig_.cameras) {
+      const take::CameraStream& s = streams_->stream(rc.camera.name);
+      if (!s.usable()) why += (why.empty() ? "" : "; ") + rc.camera.name + ": " + s.unusable;
+    }
+    throw Error("no frames: no rig camera has a readable stream (" + std::to_string(rig_.cameras.size()) +
+                    " cameras; take/take.h: cams/<camera>/ sequences, cams/<camera>.mkv|.mov|..., take.json "
+                    "\"sources\")" + (hasMasks() ? " and no <masks>/<camera>/%06d.png" : "") +
+                    (why.empty() ? "" : ": " + why),
                 context(source_.take_dir, "--take"));
+  }
 
   if (rig_format_ != "rig.json") {
     for (RigCamera& rc : rig_.cameras) {
       const std::string& name = rc.camera.name;
-      cv::Mat first;
-      for (int f : frames_) {
-        for (const fs::path& p : {framePath(name, f), hasMasks() ? maskPath(name, f) : fs::path()}) {
-          if (p.empty() || !fs::is_regular_file(p, ec)) continue;
-          first = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
-          if (!first.empty()) break;
+      const take::CameraStream& s = streams_->stream(name);
+      cv::Size size(s.usable() ? s.width : 0, s.usable() ? s.height : 0);
+      if (size.width <= 0 && hasMasks()) {
+        for (int f : frames_) {
+          const fs::path p = maskPath(name, f);
+          if (!fs::is_regular_file(p, ec)) continue;
+          const cv::Mat first = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+          if (!first.empty()) {
+            size = first.size();
+            break;
+          }
         }
-        if (!first.empty()) break;
       }
-      if (first.empty()) {
+      if (size.width <= 0) {
         ErrorContext c = context(source_.rig_path, "width/height");
         c.camera = name;
         throw Error("no readable frame of this camera in the take gives its image size", c);
       }
-      rc.camera.width = first.cols;
-      rc.camera.height = first.rows;
+      rc.camera.width = size.width;
+      rc.camera.height = size.height;
     }
   }
 
@@ -163,30 +172,22 @@ Take::Take(const TakeSource& source) : source_(source) {
   }
 }
 
-fs::path Take::framePath(const std::string& camera, int frame) const {
-  return source_.take_dir / "cams" / camera / frameName(frame);
+std::string Take::source(const std::string& camera, int frame) const {
+  return streams_->has(camera) ? streams_->describe(camera, frame) : "cams/" + camera;
 }
 
 fs::path Take::maskPath(const std::string& camera, int frame) const {
   return source_.masks_dir / camera / frameName(frame);
 }
 
-fs::path Take::cleanPlatePath(const std::string& camera) const {
-  return source_.take_dir / "clean" / (camera + ".png");
-}
-
 cv::Mat Take::cleanPlate(const std::string& camera) const {
-  const fs::path path = cleanPlatePath(camera);
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) return {};
-  cv::Mat plate = readImage(path, cv::IMREAD_COLOR);
+  const cv::Mat plate = streams_->cleanPlate(camera);
   const RigCamera& rc = rig_.at(camera);
-  if (plate.cols != rc.camera.width || plate.rows != rc.camera.height) {
-    ErrorContext c = context(path);
+  if (!plate.empty() && (plate.cols != rc.camera.width || plate.rows != rc.camera.height)) {
+    ErrorContext c = context(source_.take_dir / "clean");
     c.camera = camera;
     throw Error("clean plate is " + std::to_string(plate.cols) + "x" + std::to_string(plate.rows) +
-                    ", the camera " + std::to_string(rc.camera.width) + "x" +
-                    std::to_string(rc.camera.height),
+                    ", the camera " + std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height),
                 c);
   }
   return plate;
@@ -194,45 +195,58 @@ cv::Mat Take::cleanPlate(const std::string& camera) const {
 
 namespace {
 
-// One camera's image file for one frame; what = "frame" or "mask" (for the drop reason).
-CameraFrame readCameraFile(const RigCamera& rc, int frame, const fs::path& path, bool mask) {
+// One camera's matte for one frame.
+CameraFrame readMaskFile(const RigCamera& rc, int frame, const fs::path& path) {
   CameraFrame out;
   out.camera = rc.camera.name;
   out.frame = frame;
-  const char* what = mask ? "mask" : "frame";
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) {
-    out.dropped = std::string("missing ") + what + " " + path.string();
+    out.dropped = "missing mask " + path.string();
     return out;
   }
   cv::Mat image;
   try {
-    image = readImage(path, mask ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
+    image = readImage(path, cv::IMREAD_GRAYSCALE);
   } catch (const Error& e) {
-    out.dropped = std::string("unreadable ") + what + " (corrupt or truncated?): " + e.what();
+    out.dropped = std::string("unreadable mask (corrupt or truncated?): ") + e.what();
     return out;
   }
   if (image.cols != rc.camera.width || image.rows != rc.camera.height) {
-    out.dropped = std::string(what) + " is " + std::to_string(image.cols) + "x" +
-                  std::to_string(image.rows) + ", the rig says " + std::to_string(rc.camera.width) +
-                  "x" + std::to_string(rc.camera.height) + ": " + path.string();
+    out.dropped = "mask is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) + ", the rig says " +
+                  std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height) + ": " + path.string();
     return out;
   }
-  if (mask) {
-    cv::threshold(image, out.mask, 127, 255, cv::THRESH_BINARY);
-  } else {
-    out.image = image;
-  }
+  cv::threshold(image, out.mask, 127, 255, cv::THRESH_BINARY);
   return out;
 }
 
 }  // namespace
 
+// One camera's plate for one frame through the take model, checked against the rig's size.
+CameraFrame Take::plate(const RigCamera& rc, int frame) const {
+  CameraFrame out;
+  out.camera = rc.camera.name;
+  out.frame = frame;
+  const take::CameraImage img = streams_->read(rc.camera.name, frame);
+  if (!img.ok()) {
+    out.dropped = img.dropped;
+    return out;
+  }
+  if (img.image.cols != rc.camera.width || img.image.rows != rc.camera.height) {
+    out.dropped = "frame is " + std::to_string(img.image.cols) + "x" + std::to_string(img.image.rows) +
+                  ", the rig says " + std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height) +
+                  ": " + img.source;
+    return out;
+  }
+  out.image = img.image;
+  return out;
+}
+
 CameraFrame Take::read(const std::string& camera, int frame) const {
   const RigCamera& rc = rig_.at(camera);
   if (CameraFrame lost = unposed(camera, frame); !lost.ok()) return lost;
-  return hasMasks() ? readCameraFile(rc, frame, maskPath(camera, frame), true)
-                    : readCameraFile(rc, frame, framePath(camera, frame), false);
+  return hasMasks() ? readMaskFile(rc, frame, maskPath(camera, frame)) : plate(rc, frame);
 }
 
 CameraFrame Take::unposed(const std::string& camera, int frame) const {
@@ -247,7 +261,7 @@ CameraFrame Take::unposed(const std::string& camera, int frame) const {
 
 CameraFrame Take::readPlate(const std::string& camera, int frame) const {
   if (CameraFrame lost = unposed(camera, frame); !lost.ok()) return lost;
-  return readCameraFile(rig_.at(camera), frame, framePath(camera, frame), false);
+  return plate(rig_.at(camera), frame);
 }
 
 double Take::gain(const std::string& camera) const {

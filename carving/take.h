@@ -1,23 +1,26 @@
 #pragma once
 // Reading a take for carving: the rig (rig.json, or another tool's text rows of 3x4 projection
-// matrices or K R t), the camera frames cams/<cam>/%06d.png, optional external mattes
-// <masks>/<cam>/%06d.png (> 127 = inside; they replace keying), optional clean plates
-// clean/<cam>.png and optional per-frame poses of the main camera. A camera whose frame is
-// missing, unreadable or of the wrong size is dropped for that frame with the reason, never
-// fatal. Layout: docs/formats.md ("Carve output" and "Synthetic take").
+// matrices or K R t), the cameras' streams through the take model (take/take.h: image
+// sequences of any pattern, videos, offsets and timecode, clean plates), optional external
+// mattes <masks>/<cam>/%06d.png (> 127 = inside; they replace keying) and optional per-frame
+// poses of the main camera. A camera whose frame is missing, unreadable or of the wrong size is
+// dropped for that frame with the reason, never fatal. Layout: docs/formats.md ("Take folder",
+// "Carve output").
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
 #include "core/rig.h"
+#include "take/take.h"
 
 namespace previz::carving {
 
 struct TakeSource {
-  std::filesystem::path take_dir;    // holds cams/<cam>/%06d.png (and clean/<cam>.png)
+  std::filesystem::path take_dir;    // cams/ (take/take.h), clean/, take.json
   // rig.json (by extension .json), else text rows, one camera a line: "name p11 .. p34"
   // (projection rows, P = K [R | t]) or "name k11 .. k33 r11 .. r33 t1 t2 t3" (K R t rows),
   // told apart by the count of numbers. Rows carry no image size: each camera takes the size
@@ -53,23 +56,25 @@ class Take {
   bool hasMasks() const { return !source_.masks_dir.empty(); }
   bool hasMainPoses() const { return !source_.main_poses.empty(); }
 
-  // Frame numbers of the take, ascending: every frame any rig camera has a file for (plate, or
-  // mask with masks), and 0 .. frames-1 from take.json when it has them.
+  // Frame numbers of the take, ascending: every take frame any rig camera has (take/take.h), or
+  // mask with masks, and 0 .. frames-1 from take.json when it has them.
   const std::vector<int>& frames() const { return frames_; }
 
-  std::filesystem::path framePath(const std::string& camera, int frame) const;
+  // The take model over the rig's cameras (streams, offsets, timecode).
+  const take::Take& streams() const { return *streams_; }
+  // Where a camera's frame comes from, for messages: "cams/A/000012.png", "cams/A.mkv frame 14".
+  std::string source(const std::string& camera, int frame) const;
   std::filesystem::path maskPath(const std::string& camera, int frame) const;
-  std::filesystem::path cleanPlatePath(const std::string& camera) const;
 
-  // The camera's clean plate (empty stage, 8-bit BGR) or an empty Mat when there is none.
-  // Throws Error naming the file when one exists but cannot be read.
+  // The camera's clean plate (empty stage, 8-bit BGR) or an empty Mat when there is none
+  // (take::Take::cleanPlate). Throws Error naming the file when one exists but cannot be used.
   cv::Mat cleanPlate(const std::string& camera) const;
 
   // Reads one camera's frame (its mask with masks, else its plate). Never throws for a bad
   // frame: the reason goes to CameraFrame::dropped. Throws only for a camera not in the rig.
   CameraFrame read(const std::string& camera, int frame) const;
 
-  // Reads one camera's plate (cams/<cam>/%06d.png) whether or not the take has masks (depth
+  // Reads one camera's plate whether or not the take has masks (depth
   // refinement compares plates); never throws for a bad frame, as read().
   CameraFrame readPlate(const std::string& camera, int frame) const;
 
@@ -81,10 +86,12 @@ class Take {
   RigCamera cameraAt(const std::string& camera, int frame) const;
 
  private:
+  CameraFrame plate(const RigCamera& rc, int frame) const;
   // Not ok() for the main camera at a frame its poses file marks lost or bad.
   CameraFrame unposed(const std::string& camera, int frame) const;
 
   TakeSource source_;
+  std::shared_ptr<const take::Take> streams_;
   Rig rig_;
   std::string rig_format_;
   std::vector<int> frames_;

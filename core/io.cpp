@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <set>
@@ -21,6 +22,7 @@
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfTimeCodeAttribute.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/error.h"
@@ -178,6 +180,14 @@ void writeExr(const fs::path& path, const ExrImage& exr) {
       header.insert(key, Imf::StringAttribute(value));
     }
     header.insert(kChannelOrderAttribute, Imf::StringAttribute(joinNames(exr.channels)));
+    if (!exr.timecode.empty()) {
+      int h = 0, m = 0, sec = 0, f = 0;
+      char sep = ':';
+      if (std::sscanf(exr.timecode.c_str(), "%d:%d:%d%c%d", &h, &m, &sec, &sep, &f) != 5 || h < 0 || h > 23 ||
+          m < 0 || m > 59 || sec < 0 || sec > 59 || f < 0 || f > 59 || (sep != ':' && sep != ';'))
+        throw Error("EXR timecode must be HH:MM:SS:FF (got '" + exr.timecode + "')", fileContext(path, "timeCode"));
+      header.insert("timeCode", Imf::TimeCodeAttribute(Imf::TimeCode(h, m, sec, f, sep == ';')));
+    }
 
     Imf::FrameBuffer fb;
     // OpenEXR does not convert FLOAT pixels to HALF on output: convert here, row-major.
@@ -228,6 +238,13 @@ ExrImage readExr(const fs::path& path) {
     for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
       names.push_back(it.name());
     std::string order;
+    if (const auto* tc = header.findTypedAttribute<Imf::TimeCodeAttribute>("timeCode")) {
+      const Imf::TimeCode& t = tc->value();
+      char text[32];
+      std::snprintf(text, sizeof(text), "%02d:%02d:%02d%c%02d", t.hours(), t.minutes(), t.seconds(),
+                    t.dropFrame() ? ';' : ':', t.frame());
+      exr.timecode = text;
+    }
     for (auto it = header.begin(); it != header.end(); ++it) {
       const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute());
       if (!s) continue;

@@ -32,6 +32,9 @@ struct ExrImage {
   // Store the channels as 16-bit HALF (colour, as render engines deliver it: half the size;
   // relative precision 2^-11). Depth and ST maps stay FLOAT. Reading always gives CV_32F.
   bool half = false;
+  // The standard "timeCode" attribute (SMPTE 12M, as cameras and conform tools write it), as
+  // "HH:MM:SS:FF" ("HH:MM:SS;FF" drop frame); "" = none.
+  std::string timecode;
 };
 void writeExr(const std::filesystem::path& path, const ExrImage& exr);
 ExrImage readExr(const std::filesystem::path& path);

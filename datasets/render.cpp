@@ -471,11 +471,23 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
       hashKey(options.seed, static_cast<std::uint64_t>(options.camera_index),
               static_cast<std::uint64_t>(options.frame));
   using detail::quantize255;
+  if (options.keep_encoded) view.encoded.create(H, W, CV_32FC3);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int v = 0; v < H; ++v) {
     const float* rgb = linear.ptr<float>(v);
     std::uint8_t* bgr = view.bgr.ptr<std::uint8_t>(v);
-    if (noise > 0) {
+    if (options.keep_encoded) {
+      float* enc = view.encoded.ptr<float>(v);
+      for (int u = 0; u < W; ++u) {
+        const std::uint64_t pixel = static_cast<std::uint64_t>(v) * W + u;
+        for (int c = 0; c < 3; ++c) {
+          double value = table.encode255(rgb[3 * u + c]);
+          if (noise > 0) value += noise * normalFromKey(hashKey(stream, pixel, c));
+          bgr[3 * u + (2 - c)] = quantize255(value);
+          enc[3 * u + (2 - c)] = static_cast<float>(std::clamp(value, 0.0, 255.0) / 255.0);
+        }
+      }
+    } else if (noise > 0) {
       for (int u = 0; u < W; ++u) {
         const std::uint64_t pixel = static_cast<std::uint64_t>(v) * W + u;
         for (int c = 0; c < 3; ++c) {

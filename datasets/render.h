@@ -32,6 +32,7 @@ struct RenderOptions {
   int camera_index = 0;        // noise stream
   int frame = 0;               // noise stream
   bool truth = true;           // also fill depth / labels / mask from the pixel-centre ray
+  bool keep_encoded = false;   // also fill RenderedView::encoded (16-bit and float plates)
   int threads = 0;             // OpenMP threads for this call (0 = OpenMP's default)
 
   void validate() const;  // throws Error naming the field
@@ -48,6 +49,9 @@ struct RenderedView {
   cv::Mat depth;   // CV_32FC1, metric z along the camera axis, +inf where nothing is hit
   cv::Mat labels;  // CV_8UC1, ObjectClass of the pixel-centre hit
   cv::Mat mask;    // CV_8UC1, 255 where the pixel-centre ray hits the actor, else 0
+  // With keep_encoded: the picture before 8-bit rounding (CV_32FC3 BGR, sRGB-coded, noise
+  // included, clamped to [0, 1]); bgr is exactly its codes rounded. Deeper plates store this.
+  cv::Mat encoded;
   int not_invertible = 0;  // pixels whose centre lies past the lens' fold (rendered black)
 };
 

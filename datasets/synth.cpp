@@ -24,6 +24,7 @@
 #include "datasets/rig_capture.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
+#include "take/stream_writer.h"
 
 namespace previz::synth {
 namespace {
@@ -111,6 +112,11 @@ nlohmann::json optionsToJson(const SynthOptions& o) {
           {"board_seed", o.board_seed.value_or(o.seed)},
           {"floor_frames", o.floor_frames},
           {"delay_frames", o.delay_frames},
+          {"camera_format", o.camera_format},
+          {"sequence_pattern", o.sequence_pattern},
+          {"sequence_start", o.sequence_start},
+          {"start_timecode", o.start_timecode},
+          {"late_frames", o.late_frames},
           {"bump", bumps}};
 }
 
@@ -249,8 +255,33 @@ void SynthOptions::validate() const {
   }
   if (threads < 0) badOption("threads", "must be >= 0 (got " + str(threads) + ")");
   // Rig preset only: a knocked or late camera, another board path, no floor board.
+  if (preset != Preset::kRig && preset != Preset::kStudio && !delay_frames.empty())
+    badOption("delay_frames", "applies to the rig and studio presets only");
+  if (preset != Preset::kStudio) {
+    if (camera_format != "png") badOption("camera_format", "applies to the studio preset only");
+    if (!sequence_pattern.empty()) badOption("sequence_pattern", "applies to the studio preset only");
+    if (sequence_start != 0) badOption("sequence_start", "applies to the studio preset only");
+    if (!start_timecode.empty()) badOption("start_timecode", "applies to the studio preset only");
+    if (!late_frames.empty()) badOption("late_frames", "applies to the studio preset only");
+  }
+  {
+    take::StreamWriterOptions w;
+    w.format = camera_format;
+    w.pattern = sequence_pattern;
+    w.first_number = sequence_start;
+    w.fps = fps;
+    w.start_timecode = start_timecode;
+    try {
+      w.validate();
+    } catch (const Error& e) {
+      const std::string field = e.context().field == "format"         ? "camera_format"
+                                : e.context().field == "pattern"      ? "sequence_pattern"
+                                : e.context().field == "first_number" ? "sequence_start"
+                                                                      : e.context().field;
+      badOption(field, e.message());
+    }
+  }
   if (preset != Preset::kRig) {
-    if (!delay_frames.empty()) badOption("delay_frames", "applies to the rig preset only");
     if (!bump.empty()) badOption("bump", "applies to the rig preset only");
     if (board_seed) badOption("board_seed", "applies to the rig preset only");
     if (!floor_frames) badOption("floor_frames", "applies to the rig preset only");
@@ -262,6 +293,11 @@ void SynthOptions::validate() const {
     }
     return false;
   };
+  for (const auto& [name, late] : late_frames) {
+    if (!known(name)) badOption("late_frames", "names no camera of the take: '" + name + "'", name);
+    if (late < 0 || late >= this->frames)
+      badOption("late_frames", "of '" + name + "' must be in [0, frames) (got " + str(late) + ")", name);
+  }
   for (const auto& [name, frames_late] : delay_frames) {
     if (!known(name)) badOption("delay_frames", "names no camera of the take: '" + name + "'", name);
     if (std::abs(frames_late) >= std::max(1, this->frames)) {
@@ -408,6 +444,34 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   nlohmann::json cg_frames = nlohmann::json::array();
   std::vector<int> floor_frames;
 
+  // The studio cameras' streams, one writer each, in the form asked (take/stream_writer.h). A
+  // camera that started late carries its start in its timecode (EXR attribute, container) or,
+  // when the form has none, in take.json "offsets"; sequences without timecode are numbered by
+  // take frame (offsets then map sequence_start back to take frame 0).
+  const auto perCamera = [](const std::map<std::string, int>& m, const std::string& name) {
+    const auto it = m.find(name);
+    return it == m.end() ? 0 : it->second;
+  };
+  std::map<std::string, take::StreamWriter> writers;
+  nlohmann::json offsets = nlohmann::json::object();
+  bool keep_encoded = false;
+  if (studio_preset) {
+    for (const TakeCamera& c : cameras) {
+      const std::string& name = c.rig.camera.name;
+      take::StreamWriterOptions base;
+      base.format = o.camera_format;
+      base.pattern = o.sequence_pattern;
+      base.fps = o.fps;
+      base.first_number = o.sequence_start;
+      base.start_timecode = o.start_timecode;
+      keep_encoded = base.format == "png16" || base.format == "tif16" || base.format == "exr";
+      const take::StreamPlacement place = take::placeStream(base, perCamera(o.late_frames, name));
+      const take::StreamWriterOptions& w = place.writer;
+      if (place.offset) offsets[name] = *place.offset;
+      writers.emplace(name, take::StreamWriter(out, name, {c.rig.camera.width, c.rig.camera.height}, w));
+    }
+  }
+
   double render_ms = 0, plate_ms = 0;
   for (int f = 0; f < o.frames; ++f) {
     const double t = f / o.fps;
@@ -468,7 +532,10 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
 
     for (const TakeCamera& c : cameras) {
       const std::string& name = c.rig.camera.name;
+      const int delay = perCamera(o.delay_frames, name);
+      if (f < perCamera(o.late_frames, name)) continue;  // not recording yet
       RenderOptions ro;
+      ro.keep_encoded = keep_encoded;
       ro.samples_per_pixel = o.samples_per_pixel;
       ro.gain = c.gain;
       ro.blur_sigma_px = o.blur_sigma_px;
@@ -478,13 +545,29 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       ro.frame = f;
       ro.threads = o.threads;
       const Clock::time_point start = Clock::now();
-      const ShutterSample centre{&centre_scene, poseAt(c, t)};
-      const RenderedView view =
-          renderView(c.rig.camera, shutterFor(c, instant_scenes, centre_scene), centre, ro);
+      RenderedView view;
+      if (delay == 0) {
+        const ShutterSample centre{&centre_scene, poseAt(c, t)};
+        view = renderView(c.rig.camera, shutterFor(c, instant_scenes, centre_scene), centre, ro);
+      } else {
+        // An unsynchronised camera films the scene of frame f - delay (its truth layers too).
+        const double shift_s = -delay / o.fps;
+        const Scene shifted = sceneAt(t + shift_s, plate_layers);
+        std::vector<Scene> shifted_instants;
+        std::vector<ShutterSample> shutter;
+        if (single_instant) {
+          shutter.push_back({&shifted, poseAt(c, t + shift_s)});
+        } else {
+          for (double ti : times) shifted_instants.push_back(sceneAt(ti + shift_s, plate_layers));
+          for (size_t i = 0; i < times.size(); ++i)
+            shutter.push_back({&shifted_instants[i], poseAt(c, times[i] + shift_s)});
+        }
+        view = renderView(c.rig.camera, shutter, {&shifted, poseAt(c, t + shift_s)}, ro);
+      }
       const double ms = msSince(start);
       plate_ms += ms;
       render_ms += ms;
-      writeImageAtomic(out / "cams" / name / png, view.bgr);
+      writers.at(name).write(view.bgr, view.encoded);
       writeDepthExr(out / "truth" / "depth" / name / exr, view.depth,
                     {{"previz:camera", name}, {"previz:frame", std::to_string(f)}});
       writeImageAtomic(out / "truth" / "masks" / name / png, view.mask);
@@ -602,6 +685,8 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
     }
   }
 
+  for (auto& [name, w] : writers) w.close();
+
   // take.json last: its presence marks a complete take.
   nlohmann::json names = nlohmann::json::array();
   nlohmann::json gains = nlohmann::json::object();
@@ -624,6 +709,8 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
                          {"shutter_instants", board_preset ? 1 : static_cast<int>(shutterTimes(0, o).size())},
                          {"options", optionsToJson(o)}};
   if (board_preset) take["board"] = o.board;
+  if (!offsets.empty()) take["offsets"] = offsets;
+  if (!o.start_timecode.empty()) take["start_timecode"] = o.start_timecode;
   writeJsonAtomic(out / "take.json", take);
 
   SynthSummary summary;

@@ -39,7 +39,17 @@ struct SynthOptions {
   std::string camera = "main";   // intrinsics preset: "main", "witness" (= witness01) or a witness name
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
   int threads = 0;               // OpenMP threads (0 = default)
-  // Rig preset only (datasets/rig_capture.h RigCaptureOptions has the same meanings):
+  // Studio preset: the form of the cameras' streams, as a camera or a conform delivers them
+  // (take/stream_writer.h; read back by the take model, take/take.h):
+  std::string camera_format = "png";       // png|jpg|png16|tif16|exr (sequences), ffv1|h264|prores (videos)
+  std::string sequence_pattern;            // "" = %06d; e.g. "{camera}_A001C003.####"
+  int sequence_start = 0;                  // number of a sequence's first file (VFX: 1001)
+  std::string start_timecode;              // timecode of take frame 0 ("" = none): EXR timeCode, container
+  // camera -> it started recording N frames after take frame 0 (its stream begins there; its
+  // timecode, or take.json "offsets" when there is none, says so).
+  std::map<std::string, int> late_frames;
+  // Rig preset (datasets/rig_capture.h RigCaptureOptions has the same meanings), and the studio
+  // preset for delay_frames (an unsynchronised camera: its stream's take frame f shows f - delay):
   std::optional<std::uint64_t> board_seed;  // board trajectory; default: seed
   bool floor_frames = true;                 // false: every frame waves the board (no floor.json)
   std::map<std::string, int> delay_frames;  // camera -> frames late (its frame f shows f - delay)

@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "take/take.h"
 
 namespace previz::multicam {
 namespace {
@@ -100,37 +101,6 @@ struct ItemResult {
   std::vector<calib::Observation> points;
   std::string failure;  // image unreadable
 };
-
-int frameCountOf(const fs::path& take, const std::vector<std::string>& cameras) {
-  const fs::path take_json = take / "take.json";
-  if (fs::exists(take_json)) {
-    const nlohmann::json j = readJsonFile(take_json);
-    if (j.contains("frames")) {
-      if (!j.at("frames").is_number_integer() || j.at("frames").get<long long>() < 0) {
-        throw fieldError(take_json.string(), "frames", "take: 'frames' must be an integer >= 0");
-      }
-      return j.at("frames").get<int>();
-    }
-  }
-  // Else: one past the highest %06d.png of any camera.
-  int count = 0;
-  for (const std::string& name : cameras) {
-    for (const auto& entry : fs::directory_iterator(take / "cams" / name)) {
-      const fs::path p = entry.path();
-      if (p.extension() != ".png") continue;
-      const std::string stem = p.stem().string();
-      if (stem.empty() || !std::all_of(stem.begin(), stem.end(), ::isdigit)) continue;
-      count = std::max(count, std::stoi(stem) + 1);
-    }
-  }
-  return count;
-}
-
-std::string frameFile(int frame) {
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%06d.png", frame);
-  return buf;
-}
 
 }  // namespace
 
@@ -306,18 +276,22 @@ RigObservations detectTake(const fs::path& take, const std::vector<std::string>&
     context.file = take.string();
     throw Error("detect: no cameras given", context);
   }
+  take::TakeOptions streams;
+  streams.cameras = cameras;
+  const take::Take streams_of(take, streams);
   for (const std::string& name : cameras) {
-    const fs::path folder = take / "cams" / name;
-    if (!fs::is_directory(folder)) {
+    const take::CameraStream& s = streams_of.stream(name);
+    if (s.kind == take::SourceKind::kNone) {
       ErrorContext context;
-      context.file = folder.string();
+      context.file = (take / "cams" / name).string();
       context.camera = name;
-      throw Error("detect: camera '" + name + "' has no image folder " + folder.string(), context);
+      throw Error("detect: camera '" + name + "' has no stream: " + s.unusable, context);
     }
   }
   RigObservations obs;
   obs.board = board;
-  obs.frame_count = frameCountOf(take, cameras);
+  // Frames 0 .. the last take frame any camera has (or take.json's count).
+  obs.frame_count = streams_of.frames().empty() ? 0 : streams_of.frames().back() + 1;
   if (floor) {
     obs.has_floor = true;
     obs.floor = *floor;
@@ -341,12 +315,14 @@ RigObservations detectTake(const fs::path& take, const std::vector<std::string>&
   for (int i = 0; i < total; ++i) {
     const Item& item = items[i];
     ItemResult& r = results[i];
-    const fs::path file = take / "cams" / cameras[item.camera] / frameFile(item.frame);
     try {
-      const cv::Mat image = readImage(file, cv::IMREAD_COLOR);
+      const take::CameraImage frame = streams_of.read(cameras[item.camera], item.frame);
+      if (!frame.ok()) throw Error(frame.dropped);
+      const cv::Mat& image = frame.image;
+      const std::string file = (take / frame.source).string();
       r.size = image.size();
       const BoardSpec& spec = obs.boardOf(item.frame);
-      const calib::ViewObservations view = calib::detectBoard(image, spec, options.detect, file.string());
+      const calib::ViewObservations view = calib::detectBoard(image, spec, options.detect, file);
       r.points = view.points;
     } catch (const std::exception& e) {
       r.failure = e.what();

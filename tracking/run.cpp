@@ -6,13 +6,12 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
-#include <regex>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "take/take.h"
 
 namespace fs = std::filesystem;
 
@@ -32,21 +31,8 @@ double median(std::vector<double> v) {
 }
 double maxOf(const std::vector<double>& v) { return v.empty() ? 0 : *std::max_element(v.begin(), v.end()); }
 
-fs::path framePath(const fs::path& take, const std::string& camera, int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d.png", frame);
-  return take / "cams" / camera / name;
-}
-
-double takeFps(const fs::path& take, double given) {
-  if (given > 0) return given;
-  const fs::path tj = take / "take.json";
-  if (fs::exists(tj)) {
-    const nlohmann::json j = readJsonFile(tj);
-    if (j.contains("fps") && j["fps"].is_number() && j["fps"].get<double>() > 0) return j["fps"].get<double>();
-  }
-  return 24.0;
-}
+// The take's rate: the option when given, else the take model's (take.json, a video's, 24).
+double takeFps(const take::Take& take, double given) { return given > 0 ? given : take.fps(); }
 
 std::vector<int> selectFrames(const std::vector<int>& all, const TrackRunOptions& o) {
   std::vector<int> out;
@@ -81,23 +67,6 @@ void TrackRunOptions::validate() const {
     throw Error("track: fps must be > 0", c);
   }
   if (!udp.empty()) parseHostPort(udp);
-}
-
-std::vector<int> takeFrames(const fs::path& take, const std::vector<std::string>& cameras) {
-  static const std::regex kFrame("^([0-9]{6})\\.png$");
-  std::vector<int> frames;
-  for (const std::string& cam : cameras) {
-    const fs::path dir = take / "cams" / cam;
-    if (!fs::is_directory(dir)) continue;
-    for (const auto& e : fs::directory_iterator(dir)) {
-      std::smatch m;
-      const std::string name = e.path().filename().string();
-      if (std::regex_match(name, m, kFrame)) frames.push_back(std::stoi(m[1]));
-    }
-  }
-  std::sort(frames.begin(), frames.end());
-  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
-  return frames;
 }
 
 std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
@@ -139,17 +108,21 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
 
   TrackRunSummary s;
   for (const RigCamera& rc : cams) s.cameras.push_back(rc.camera.name);
-  const std::vector<int> in_range = selectFrames(takeFrames(in.take, s.cameras), o);
+  take::TakeOptions streams;
+  streams.cameras = s.cameras;
+  const take::Take take(in.take, streams);
+  const std::vector<int> in_range = selectFrames(take.frames(), o);
   if (in_range.empty()) {
     ErrorContext c;
     c.file = (in.take / "cams").string();
-    throw Error("track: no frames (cams/<camera>/%06d.png) for the selected cameras and frames", c);
+    throw Error("track: no frames for the selected cameras and frames (take/take.h: cams/<camera>/ sequences, "
+                "cams/<camera>.mkv|.mov|..., take.json \"sources\")", c);
   }
   std::vector<int> frames;
   for (size_t i = 0; i < in_range.size(); ++i)
     if (static_cast<int>(i % static_cast<size_t>(o.shard_count)) == o.shard_index) frames.push_back(in_range[i]);
   s.selected = frames;
-  const double fps = takeFps(in.take, o.fps);
+  const double fps = takeFps(take, o.fps);
   PropTracker tracker(cams, props, o.tracker);
   std::unique_ptr<PoseStreamer> streamer;
   if (!o.udp.empty()) {
@@ -185,13 +158,18 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     std::vector<std::string> failures(cams.size());
 #pragma omp parallel for schedule(dynamic)
     for (int c = 0; c < n_cams; ++c) {
-      const fs::path p = framePath(in.take, cams[static_cast<size_t>(c)].camera.name, f);
-      if (!fs::exists(p)) {
-        failures[static_cast<size_t>(c)] = "missing " + p.string();
-        continue;
+      const RigCamera& rc = cams[static_cast<size_t>(c)];
+      const take::CameraImage img = take.read(rc.camera.name, f);
+      if (!img.ok()) {
+        failures[static_cast<size_t>(c)] = img.dropped;
+      } else if (img.image.cols != rc.camera.width || img.image.rows != rc.camera.height) {
+        failures[static_cast<size_t>(c)] = "image is " + std::to_string(img.image.cols) + "x" +
+                                           std::to_string(img.image.rows) + ", the rig's camera is " +
+                                           std::to_string(rc.camera.width) + "x" +
+                                           std::to_string(rc.camera.height) + ": " + img.source;
+      } else {
+        images[static_cast<size_t>(c)] = img.image;
       }
-      images[static_cast<size_t>(c)] = cv::imread(p.string(), cv::IMREAD_COLOR);
-      if (images[static_cast<size_t>(c)].empty()) failures[static_cast<size_t>(c)] = "not an image: " + p.string();
     }
     // The moving camera where its poses file has it; where the file marks it lost (or its frame
     // bad) it has no pose and sits the frame out; frames the file does not list, the rig's pose.
@@ -209,6 +187,14 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
       if (!failures[static_cast<size_t>(c)].empty())
         s.camera_failures.push_back("camera '" + cams[static_cast<size_t>(c)].camera.name + "': frame " +
                                     std::to_string(f) + ": " + failures[static_cast<size_t>(c)]);
+    // No camera has an image: the frame failed (no line, no frame file: a resume tries it
+    // again); the tracks do not bridge it.
+    if (std::all_of(images.begin(), images.end(), [](const cv::Mat& m) { return m.empty(); })) {
+      s.failed_frames.push_back(f);
+      tracker.reset();
+      if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
+      continue;
+    }
     const auto t_track = std::chrono::steady_clock::now();
     const TrackFrame r = tracker.track(f, f / fps, images);
     s.track_ms += msSince(t_track);
@@ -296,14 +282,18 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
   lookup.props.push_back(studio);
   std::map<int, Pose> truth;
   if (!in.truth.empty()) truth = readPoseLines(in.truth);
-  const std::vector<int> frames = selectFrames(takeFrames(in.take, {in.camera}), o);
+  take::TakeOptions streams;
+  streams.cameras = {in.camera};
+  const take::Take take(in.take, streams);
+  const std::vector<int> frames = selectFrames(take.frames(), o);
   if (frames.empty()) {
     ErrorContext c;
     c.file = (in.take / "cams" / in.camera).string();
     c.camera = in.camera;
-    throw Error("track camera: no frames %06d.png", c);
+    const take::CameraStream& st = take.stream(in.camera);
+    throw Error("track camera: no frames" + (st.usable() ? std::string() : ": " + st.unusable), c);
   }
-  const double fps = takeFps(in.take, o.fps);
+  const double fps = takeFps(take, o.fps);
   DetectorOptions d = o.tracker.detector;
   const auto it = o.tracker.per_camera.find(in.camera);
   if (it != o.tracker.per_camera.end()) d = it->second;
@@ -318,23 +308,19 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
     const int f = frames[i];
     // A frame that cannot be read, or is not the rig camera's size, is reported and skipped: the
     // take goes on, and the pose after it starts afresh (no filter across the gap).
-    const std::filesystem::path file = framePath(in.take, in.camera, f);
-    cv::Mat img;
-    std::string bad;
-    try {
-      img = readImage(file, cv::IMREAD_COLOR);
-      if (img.cols != rc.camera.width || img.rows != rc.camera.height)
-        bad = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", the rig's camera is " +
-              std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height);
-    } catch (const Error& e) {
-      bad = e.what();
-    }
+    const take::CameraImage frame = take.read(in.camera, f);
+    const std::string file = (in.take / frame.source).string();
+    const cv::Mat& img = frame.image;
+    std::string bad = frame.dropped;
+    if (bad.empty() && (img.cols != rc.camera.width || img.rows != rc.camera.height))
+      bad = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", the rig's camera is " +
+            std::to_string(rc.camera.width) + "x" + std::to_string(rc.camera.height);
     if (!bad.empty()) {
       live = false;
       ++s.frames;
       s.bad_frames.push_back(f);
       lines += nlohmann::json{{"frame", f}, {"time_s", f / fps}, {"camera", in.camera}, {"state", "bad frame"},
-                              {"file", file.string()}, {"reason", bad}}.dump() + "\n";
+                              {"file", file}, {"reason", bad}}.dump() + "\n";
       if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
       continue;
     }

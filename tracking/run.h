@@ -1,6 +1,7 @@
 #pragma once
-// `previz track` over a take folder: reads cams/<cam>/%06d.png frame by frame, tracks every prop
-// of props.json with PropTracker, writes one JSON line per frame (docs/formats.md, "Tracking")
+// `previz track` over a take folder: reads the cameras' frames through the take model
+// (take/take.h) frame by frame, tracks every prop of props.json with PropTracker, writes one
+// JSON line per frame (docs/formats.md, "Tracking")
 // and optionally streams FreeD or OpenTrackIO over UDP as frames are done. `previz track camera`
 // solves one camera's pose per frame from studio tags (props with T_world_prop).
 // Inputs are never modified; outputs are written atomically.
@@ -20,7 +21,7 @@
 namespace previz::tracking {
 
 struct TrackInput {
-  std::filesystem::path take;        // cams/<camera>/%06d.png
+  std::filesystem::path take;        // a take folder (take/take.h)
   std::filesystem::path rig;         // rig.json
   std::filesystem::path props;       // props.json
   std::filesystem::path main_poses;  // optional JSON lines {"frame", "T_world_cam"} of a moving camera
@@ -67,6 +68,7 @@ struct TrackRunSummary {
   int full_frames = 0;
   int rescanned_frames = 0;          // frames whose predicted regions missed a tracked prop (tracker.h)
   std::vector<std::string> camera_failures;  // "camera 'x': frame 12: reason"
+  std::vector<int> failed_frames;    // frames no camera had an image of: not tracked, not written
   double ms = 0, track_ms = 0;       // whole run / inside PropTracker::track
   int packets_sent = 0, packets_failed = 0;
   std::vector<std::string> cameras;
@@ -75,8 +77,6 @@ struct TrackRunSummary {
   int kept = 0;                      // frame files already there, not tracked again
 };
 
-// The frames of a take: every %06d.png under cams/<camera>/ for the given cameras, ascending.
-std::vector<int> takeFrames(const std::filesystem::path& take, const std::vector<std::string>& cameras);
 // JSON lines {"frame", "props": [{"id", "T_world_prop"}]} (a synthetic take's truth/props.jsonl)
 // -> frame -> prop id -> pose; throws Error naming the file and line.
 std::map<int, std::map<int, Pose>> readPropTruth(const std::filesystem::path& path);

@@ -405,8 +405,9 @@ TEST(CarveRun, MiddleburyTempleFromProjectionRowsCoversTheLeftOutView) {
   ASSERT_TRUE(fs::exists(kTemple / "templeSR_par.txt"))
       << "real data missing: " << kTemple << " (../shared/data, see its README)";
   const fs::path dir = test::scratchDir("carving_run", "temple");
-  // The take: masks/<view>/000000.png, and the cameras as projection rows P = K [R | t]
-  // (Middlebury gives K R t; the rows are what another tool would hand over).
+  // The take: the views straight from Middlebury's folder (take.json names them, one-frame
+  // cameras: take/take.h), masks/<view>/000000.png made from them, and the cameras as projection
+  // rows P = K [R | t] (Middlebury gives K R t; the rows are what another tool would hand over).
   const Rig krt = readKRtRows(kTemple / "templeSR_par.txt", 640, 480);
   ASSERT_EQ(krt.cameras.size(), 16u);
   std::ofstream rows(dir / "temple.P.txt");
@@ -418,13 +419,19 @@ TEST(CarveRun, MiddleburyTempleFromProjectionRowsCoversTheLeftOutView) {
     rows << name;
     for (int i = 0; i < 12; ++i) rows << " " << std::setprecision(17) << P(i / 4, i % 4);
     rows << "\n";
-    const cv::Mat image = cv::imread((kTemple / rc.camera.name).string(), cv::IMREAD_COLOR);
-    ASSERT_FALSE(image.empty()) << rc.camera.name;
-    fs::create_directories(dir / "masks" / name);
-    ASSERT_TRUE(cv::imwrite((dir / "masks" / name / "000000.png").string(), templeMask(image)));
   }
   rows.close();
-  fs::create_directories(dir / "take");
+  writeJsonAtomic(dir / "take" / "take.json", {{"sources", {{"*", (kTemple / "{camera}.png").string()}}}});
+  {
+    const Take plates({dir / "take", dir / "temple.P.txt", {}, {}});
+    ASSERT_EQ(plates.frames(), std::vector<int>{0});
+    for (const std::string& name : names) {
+      const CameraFrame view = plates.read(name, 0);
+      ASSERT_TRUE(view.ok()) << name << ": " << view.dropped;
+      fs::create_directories(dir / "masks" / name);
+      ASSERT_TRUE(cv::imwrite((dir / "masks" / name / "000000.png").string(), templeMask(view.image)));
+    }
+  }
 
   const Take take({dir / "take", dir / "temple.P.txt", dir / "masks", {}});
   ASSERT_EQ(take.rigFormat(), "projection rows");

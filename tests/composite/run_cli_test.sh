@@ -99,6 +99,7 @@ then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
 # Failures that name the culprit.
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet
 expect_fail "frames outside the take name the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 7:9 --quiet
+expect_fail "bad --witness-bin names the field" "witness_bin" "$bin" run --take "$take" --out "$tmp/o" --witness-bin 0 --quiet
 expect_fail "bench run: a bad --fps names the flag" "--fps" "$bin" bench run --out "$tmp/bench_out" --fps 0
 expect_fail "bench run: a bad --noise names the flag" "--noise" "$bin" bench run --out "$tmp/bench_out" --noise -1
 cp -r "$take" "$tmp/take_nocg"; rm "$tmp/take_nocg/cg/depth/000001.exr"

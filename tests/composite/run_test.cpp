@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "core/error.h"
@@ -25,6 +26,53 @@ TEST(RunTrueRig, CompositeMatchesTruthOverTheActorAndKeepsDepthOrder) {
   EXPECT_LT(m.frames[4].truth_behind_px, m.frames[4].actor_px / 2) << "actor not in front at t = 8 s";
   EXPECT_GE(m.min_psnr_db, 30.0);
   EXPECT_LE(m.wrongFraction(), 0.005);
+}
+
+// Live preview with the witnesses keyed and carved at half resolution (FrameLoopOptions
+// witness_bin = 2; `run --witness-bin 2`): the main camera's key, depth and composite against
+// the truth as at full resolution, and beside the full-resolution loop on the same take.
+TEST(RunTrueRig, WitnessesBinnedTwoByTwoKeepTheComposite) {
+  const fs::path& take = studioTake();
+  const fs::path rig = take / "truth" / "rig.json";
+  const TakeMeasure full = measureTake(take, rig, "", "true rig, witnesses at full resolution");
+  const TakeMeasure half = measureTake(take, rig, "", "true rig, witnesses binned 2 x 2", 2);
+  ASSERT_EQ(half.frames.size(), full.frames.size());
+  EXPECT_GE(half.min_psnr_db, 30.0);
+  EXPECT_LE(half.wrongFraction(), 0.005);
+  for (size_t i = 0; i < half.frames.size(); ++i)
+    EXPECT_GE(half.frames[i].psnr_db, full.frames[i].psnr_db - 1.0) << "frame " << half.frames[i].frame;
+  // The coarser silhouettes widen the hull: a little more depth error, not a different figure.
+  EXPECT_LE(half.depthErrQuantile(0.5), full.depthErrQuantile(0.5) + 0.004);
+  EXPECT_LE(half.depthErrQuantile(0.9), full.depthErrQuantile(0.9) + 0.010);
+}
+
+// A binned witness plate must come at its rig camera's size: one that does not (a camera set to
+// another resolution) drops that camera for the frame with the sizes named, and the frame goes on.
+TEST(FrameLoop, BinnedWitnessPlateOfTheWrongSizeDropsThatCamera) {
+  const fs::path& take = studioTake();
+  carving::TakeSource src;
+  src.take_dir = take;
+  src.rig_path = take / "truth" / "rig.json";
+  src.main_poses = take / "truth" / "main_poses.jsonl";
+  const carving::Take t(src);
+  app::FrameLoopOptions o;
+  o.witness_bin = 2;
+  app::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o);
+  const app::TakeReader reader(t, loop, app::TakeInputOptions{});
+  app::FrameState s;
+  reader.read(1, s);
+  ASSERT_GE(s.witness_plates.size(), 2u);
+  const cv::Size full = s.witness_plates[0].size();
+  cv::resize(s.witness_plates[0], s.witness_plates[0], cv::Size(full.width / 2, full.height / 2), 0, 0, cv::INTER_AREA);
+  loop.run(s);
+  EXPECT_NE(s.dropped[0].find("plate is " + std::to_string(full.width / 2) + "x" + std::to_string(full.height / 2) +
+                              " but the camera is " + std::to_string(full.width) + "x" + std::to_string(full.height)),
+            std::string::npos)
+      << s.dropped[0];
+  for (size_t i = 1; i < s.dropped.size(); ++i) EXPECT_EQ(s.dropped[i], "") << loop.carveCameras()[i];
+  EXPECT_FALSE(s.composite.bgr.empty());
+  o.witness_bin = 9;
+  EXPECT_THROW(app::FrameLoop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o), Error);
 }
 
 // The plug-in point of later stages (prop tracking goes after "depth"): an inserted stage runs
@@ -104,6 +152,25 @@ TEST(RunLive, ReadsVideoFilesInLockStepAndDropsLateFrames) {
     // (32.6 dB min over the same frames): a bar 2 dB under item 1's still fails on a broken key,
     // depth or frame order (frames out of step give < 20 dB).
     EXPECT_GE(min_psnr, 28.0);
+  }
+  // The same videos named by the take itself (take.json "sources": "live:..."; the CG and the
+  // main camera's poses from the studio take): no --live needed.
+  {
+    const fs::path live_take = dir / "live_take";
+    writeJsonAtomic(live_take / "take.json", {{"sources", {{"*", "live:" + (dir / "{camera}.avi").string()}}}});
+    carving::TakeSource lsrc = src;
+    lsrc.take_dir = live_take;
+    const carving::Take lt(lsrc);
+    EXPECT_EQ(lt.streams().stream("main").kind, take::SourceKind::kLive);
+    app::TakeInputOptions lio;
+    lio.cg_dir = take / "cg";
+    const app::TakeReader lreader(lt, loop, lio);
+    app::LiveOptions from_take;
+    from_take.pace = false;
+    app::LiveReader in(loop, lreader, from_take);
+    int frames = 0;
+    for (app::FrameState s; in.next(s); ++frames) EXPECT_EQ(s.frame, frames);
+    EXPECT_EQ(frames, static_cast<int>(t.frames().size()));
   }
   live.pace = true;
   live.fps = 1000;  // cameras far faster than the loop

@@ -94,6 +94,16 @@ struct TakeMeasure {
   std::vector<FrameMeasure> frames;
   double min_psnr_db = std::numeric_limits<double>::infinity();
   long long actor_px = 0, wrong_px = 0;
+  // |actor depth - true depth| (m) at the true actor pixels at least 2 px inside its silhouette
+  // where the loop has an actor depth, every frame.
+  std::vector<float> depth_err;
+  double depthErrQuantile(double q) const {
+    if (depth_err.empty()) return std::numeric_limits<double>::infinity();
+    std::vector<float> e = depth_err;
+    const size_t k = std::min(e.size() - 1, static_cast<size_t>(q * (e.size() - 1) + 0.5));
+    std::nth_element(e.begin(), e.begin() + k, e.end());
+    return e[k];
+  }
   double wrongFraction() const { return actor_px > 0 ? double(wrong_px) / actor_px : 0; }
 };
 
@@ -114,7 +124,7 @@ inline cv::Mat trueCgDepth(const RigCamera& main_true, double time_s) {
 // tracked_poses: "" = the take's true world poses of main (truth/main_poses.jsonl); else the
 // camera tracker's T_main0_main lines (app/frame_loop.h TakeInputOptions).
 inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_path, const fs::path& tracked_poses,
-                               const char* label) {
+                               const char* label, int witness_bin = 1) {
   carving::TakeSource src;
   src.take_dir = take_dir;
   src.rig_path = rig_path;
@@ -123,6 +133,7 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
   const Camera cg = readCgCamera(take_dir / "cg" / "camera.json");
   app::FrameLoopOptions lo;
   lo.debug_layers = true;
+  lo.witness_bin = witness_bin;
   app::FrameLoop loop(take.rig(), cg, lo);
   app::TakeInputOptions io;
   io.tracked_main_poses = tracked_poses;
@@ -160,6 +171,9 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
         if (mask.at<uchar>(v, u) == 0) continue;
         ++m.actor_px;
         const float zt = true_depth.at<float>(v, u), zc = cg_depth.at<float>(v, u);
+        if (inner.at<uchar>(v, u) != 0 && s.composite.layer_front.at<uchar>(v, u) != kFrontNone &&
+            std::isfinite(s.composite.layer_actor_depth.at<float>(v, u)) && std::isfinite(zt))
+          out.depth_err.push_back(std::abs(s.composite.layer_actor_depth.at<float>(v, u) - zt));
         const bool truth_front = zt < zc;
         m.truth_behind_px += truth_front ? 0 : 1;
         const uchar code = s.composite.layer_front.at<uchar>(v, u);
@@ -189,8 +203,10 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
     out.wrong_px += m.wrong_px;
     out.frames.push_back(m);
   }
-  std::printf("    %s: min PSNR %.2f dB, wrong side %lld of %lld actor px = %.3f %%\n", label, out.min_psnr_db,
-              out.wrong_px, out.actor_px, 100.0 * out.wrongFraction());
+  std::printf("    %s: min PSNR %.2f dB, wrong side %lld of %lld actor px = %.3f %%; actor depth - true depth "
+              "median %.1f mm, 90th percentile %.1f mm\n",
+              label, out.min_psnr_db, out.wrong_px, out.actor_px, 100.0 * out.wrongFraction(),
+              1e3 * out.depthErrQuantile(0.5), 1e3 * out.depthErrQuantile(0.9));
   std::fflush(stdout);
   return out;
 }

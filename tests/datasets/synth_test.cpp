@@ -683,10 +683,12 @@ TEST(SynthOptionsTest, BadOptionsNameTheField) {
   o = SynthOptions{};
   o.shutter = 1.5;
   EXPECT_EQ(fieldOf(o), "shutter");
-  // Rig-only options, and camera names the take does not have.
+  // Rig- and studio-only options, and camera names the take does not have.
   o = SynthOptions{};
   o.delay_frames["witness01"] = 1;
-  EXPECT_EQ(fieldOf(o), "delay_frames");  // studio preset
+  EXPECT_EQ(fieldOf(o), "(accepted)");  // studio preset: an unsynchronised camera
+  o.preset = Preset::kIntrinsics;
+  EXPECT_EQ(fieldOf(o), "delay_frames");
   o.preset = Preset::kRig;
   EXPECT_EQ(fieldOf(o), "(accepted)");
   o.delay_frames["witness09"] = 1;  // 8 witnesses
@@ -696,6 +698,20 @@ TEST(SynthOptionsTest, BadOptionsNameTheField) {
   } catch (const Error& e) {
     EXPECT_EQ(e.context().camera, "witness09");
   }
+  // Studio-only stream forms, checked by the writer's own rules.
+  o = SynthOptions{};
+  o.camera_format = "webp";
+  EXPECT_EQ(fieldOf(o), "camera_format");
+  o = SynthOptions{};
+  o.start_timecode = "1:00";
+  EXPECT_EQ(fieldOf(o), "start_timecode");
+  o = SynthOptions{};
+  o.late_frames["witness01"] = 24;  // the take has 24 frames
+  EXPECT_EQ(fieldOf(o), "late_frames");
+  o = SynthOptions{};
+  o.preset = Preset::kRig;
+  o.camera_format = "ffv1";
+  EXPECT_EQ(fieldOf(o), "camera_format");
   o = SynthOptions{};
   o.preset = Preset::kRig;
   o.bump["witness1"] = Pose::Identity();

@@ -1,6 +1,7 @@
 // previz take info | convert: what the take model (take/take.h) finds in a take folder, and a
 // take re-written in another form (videos, other sequences, timecode, late cameras).
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <map>
@@ -17,6 +18,8 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "take/convert.h"
+#include "tracking/props.h"
+#include "tracking/scale.h"
 #include "take/stream_writer.h"
 #include "take/take.h"
 
@@ -39,7 +42,8 @@ struct ConvertArgs {
 
 // `take sync` and `take check`: the take with its rig, as carve reads it.
 struct JudgeArgs {
-  std::string take, rig, main_poses, masks, cameras, volume;
+  std::string take, rig, main_poses, masks, cameras, volume, props;
+  double scale_tolerance = 0.02;
   carving::ConsistencyOptions options;
   bool write = false, json = false, quiet = false;
 };
@@ -105,11 +109,57 @@ int runSync(const JudgeArgs& a) {
   return all_sure ? 0 : 3;
 }
 
+// The world's scale against the take's tags of known size (props.json), on the frames judged.
+tracking::ScaleCheck checkScale(const carving::Take& t, const tracking::PropSet& props, const std::vector<int>& frames) {
+  std::vector<tracking::ScaleFrame> sf;
+  for (int f : frames) {
+    tracking::ScaleFrame s;
+    s.frame = f;
+    for (const RigCamera& rc : t.rig().cameras) {
+      s.cameras.push_back(t.cameraAt(rc.camera.name, f));
+      const carving::CameraFrame plate = t.readPlate(rc.camera.name, f);
+      s.images.push_back(plate.ok() ? plate.image : cv::Mat());
+    }
+    sf.push_back(std::move(s));
+  }
+  return tracking::measureScale(sf, props);
+}
+
 int runCheck(const JudgeArgs& a) {
   const carving::Take t(judgeSource(a));
   const carving::TakeCheck c = carving::checkTake(t, judgeOptions(a), [&](const std::string& what) {
     if (!a.quiet) std::cerr << "take check: " << what << "\n";
   });
+  // Tags of known size, when the take has them.
+  const fs::path props_path = a.props.empty() ? fs::path(a.take) / "props.json" : fs::path(a.props);
+  nlohmann::json scale = nullptr;
+  bool scale_off = false;
+  if (fs::exists(props_path)) {
+    const tracking::PropSet props = tracking::readProps(props_path);
+    bool any_tag = false;
+    for (const tracking::PropDef& p : props.props) any_tag = any_tag || !p.tags.empty();
+    if (any_tag) {
+      if (!a.quiet) std::cerr << "take check: the world's scale against the tags of " << props_path.string() << "\n";
+      // Up to 12 frames spread over the whole take (tags are where the props are, not where
+      // the sync search needs its margins).
+      std::vector<int> frames;
+      const std::vector<int>& all = t.frames();
+      const size_t n = std::min<size_t>(12, all.size());
+      for (size_t i = 0; i < n; ++i) frames.push_back(all[n == 1 ? 0 : i * (all.size() - 1) / (n - 1)]);
+      const tracking::ScaleCheck sc = checkScale(t, props, frames);
+      scale = {{"props", props_path.string()}, {"tags", sc.tags},   {"edges", sc.edges},
+               {"ratio", sc.ratio},            {"spread", sc.spread}, {"frames", sc.frames}};
+      if (sc.measured()) {
+        scale_off = std::abs(sc.ratio - 1.0) > a.scale_tolerance;
+        std::fprintf(stderr, "  world scale: tag edges measure %.4f of their printed size (+- %.4f, %d edges of %d tags)%s\n",
+                     sc.ratio, sc.spread, sc.edges, sc.tags,
+                     scale_off ? ": FLAGGED, the rig's world is not in metres (units, or the board's square size)" : "");
+      } else {
+        std::cerr << "  world scale: no tag of " << props_path.string() << " seen whole by two cameras\n";
+      }
+      scale["flagged"] = scale_off;
+    }
+  }
   int flagged = 0;
   for (const carving::CameraCheck& cc : c.cameras) {
     char line[200];
@@ -121,8 +171,12 @@ int runCheck(const JudgeArgs& a) {
   std::cerr << "take check: " << c.cameras.size() << " cameras over " << c.frames.size() << " frames, " << flagged
             << " flagged; volume " << (c.volume_automatic ? "(automatic) " : "") << c.volume.min().transpose() << " .. "
             << c.volume.max().transpose() << "\n";
-  if (a.json) std::cout << c.toJson().dump() << "\n";
-  return flagged ? 3 : 0;
+  if (a.json) {
+    nlohmann::json j = c.toJson();
+    j["scale"] = scale;
+    std::cout << j.dump() << "\n";
+  }
+  return flagged || scale_off ? 3 : 0;
 }
 
 take::TakeOptions takeOptions(const std::string& cameras) {
@@ -233,8 +287,12 @@ Runner addTakeCommand(CLI::App& app) {
   auto check = std::make_shared<JudgeArgs>();
   CLI::App* ch = cmd->add_subcommand(
       "check", "How much each camera agrees with the hull of the others, per frame; a camera that disagrees "
-               "is named with the likely cause (out of sync, image shift, keyer); exit 3 when one is flagged");
+               "is named with the likely cause (out of sync, image shift, keyer); the world's scale against tags "
+               "of known size; exit 3 when a camera or the scale is flagged");
   addJudgeOptions(ch, *check);
+  ch->add_option("--props", check->props, "Tags of known size for the world's scale (default: the take's props.json)");
+  ch->add_option("--scale-tolerance", check->scale_tolerance, "Flag the world's scale when off by more than this fraction")
+      ->capture_default_str();
 
   return [cmd, i, c, sy, ch, info, conv, sync, check]() {
     if (i->parsed()) return runInfo(*info);

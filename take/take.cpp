@@ -301,7 +301,7 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
     } else {
       s.offset = 0;
       s.offset_from = "none";
-      if (!all_timecoded && !s.start_timecode.empty())
+      if (!all_timecoded && start_tc.count(name))
         s.notes.push_back("its timecode " + s.start_timecode +
                           " is not used: not every camera has one (offsets: take.json \"offsets\" or `previz take sync`)");
     }
@@ -312,8 +312,12 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
     const std::vector<int> f = s.takeFrames();
     frames.insert(f.begin(), f.end());
   }
-  if (j.contains("frames"))
-    for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(f);
+  // take.json "frames": the take's length from its first frame (frames no camera has are then
+  // listed too, and fail with every camera named).
+  if (j.contains("frames")) {
+    const int first = frames.empty() ? 0 : *frames.begin();
+    for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(first + f);
+  }
   frames_.assign(frames.begin(), frames.end());
 }
 

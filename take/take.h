@@ -18,7 +18,7 @@
 // --write` left in out/sync.json (carving/consistency.h), else 0 (sequences keep their own
 // numbers: frame 1001 of "%04d" is take frame 1001). The take's frames are those some camera
 // really has (containers lie: a video is read as far as it decodes, a sparse sequence lists only
-// its frames) and 0 .. frames-1 of take.json "frames".
+// its frames) and take.json "frames" frames from the first of them (or from 0).
 // Images come out as 8-bit BGR whatever the file holds: 16-bit scaled (v / 257, rounded), float
 // (EXR, float TIFF) taken as linear light and sRGB-encoded once (core/srgb.h), grey expanded,
 // alpha dropped. A camera is never fatal for a frame: a missing, unreadable or out-of-range

@@ -147,6 +147,29 @@ PY
 then ok "carve: a clean plate of another size drops its camera, named; the frame is carved"
 else fail "bad clean plate: $(cat "$tmp/badplate.err")"; fi
 
+# The world's scale against the crate's tags (props.json, 0.12 m): metric with the true rig; a rig
+# whose world is 10 % too large (every camera centre x 1.1: as a rig solved on a board printed
+# 10 % small) is flagged, though its cameras agree with each other as well as before.
+python3 - "$rig" "$tmp/rig_x1.1.json" <<'PY'
+import json, sys
+rig = json.load(open(sys.argv[1]))
+for c in rig["cameras"]:
+    c["T_world_cam"]["t"] = [1.1 * v for v in c["T_world_cam"]["t"]]
+json.dump(rig, open(sys.argv[2], "w"))
+PY
+"$bin" take check "$take" --rig "$rig" --main-poses "$poses" --json --quiet > "$tmp/scale1.json" 2> "$tmp/scale1.err"; rc1=$?
+"$bin" take check "$take" --rig "$tmp/rig_x1.1.json" --json --quiet > "$tmp/scale2.json" 2> "$tmp/scale2.err"; rc2=$?
+if [ $rc1 -eq 0 ] && [ $rc2 -eq 3 ] && python3 - "$tmp/scale1.json" "$tmp/scale2.json" <<'PY'
+import json, sys
+a, b = (json.load(open(f)) for f in sys.argv[1:3])
+print("scale: true rig %.4f (%d edges), rig x1.1 %.4f" % (a["scale"]["ratio"], a["scale"]["edges"], b["scale"]["ratio"]))
+assert a["scale"]["edges"] >= 8 and abs(a["scale"]["ratio"] - 1) < 0.01 and not a["scale"]["flagged"], a["scale"]
+assert abs(b["scale"]["ratio"] - 1.1) < 0.015 and b["scale"]["flagged"], b["scale"]
+assert not any(c["flagged"] for c in a["cameras"]), [c["camera"] for c in a["cameras"] if c["flagged"]]
+PY
+then ok "take check: the world's scale from the tags is metric with the true rig, flagged at x1.1"
+else fail "take check scale (rc $rc1, $rc2): $(tail -3 "$tmp/scale1.err" "$tmp/scale2.err")"; fi
+
 # Bad input: a take whose cameras previz cannot read at all fails, it does not "succeed" empty.
 mkdir -p "$tmp/unreadable/cams"
 for c in $(python3 -c "import json; print(' '.join(c['name'] for c in json.load(open('$rig'))['cameras']))"); do

@@ -264,6 +264,44 @@ TEST(TakeModel, AnotherFpsOrAnUnreadableTimecodeIsNamedAndTheRestReads) {
   EXPECT_NE(mismatches.find("C: unreadable timecode"), std::string::npos) << mismatches;
 }
 
+// Containers lie and sequences have holes: the take lists what is really there and names the
+// difference; reading past the end or into a hole drops that camera for that frame.
+TEST(TakeModel, ACutVideoAndAHoledSequenceListWhatIsThere) {
+  const fs::path dir = test::scratchDir("take", "lies");
+  const cv::Size size(64, 48);
+  {
+    VideoWriter w(dir / "cams" / "A.avi", size, VideoWriterOptions{});
+    for (int f = 0; f < 20; ++f) w.write(frameImage(4, f, size));
+    w.close();
+  }
+  const std::string bytes = readTextFile(dir / "cams" / "A.avi");
+  writeFileAtomic(dir / "cams" / "A.avi", bytes.substr(0, bytes.size() * 7 / 10));
+  for (int f = 0; f < 20; ++f)
+    if (f != 7) touchImage(dir / "cams" / "B" / (std::to_string(100 + f) + ".png"), frameImage(5, f, size));
+  writeJsonAtomic(dir / "take.json", {{"fps", 24}, {"offsets", {{"B", 100}}}});
+  const Take take(dir);
+  const CameraStream& a = take.stream("A");
+  ASSERT_TRUE(a.usable()) << a.unusable;
+  const long long decoded = static_cast<long long>(a.source_frames.size());
+  EXPECT_GT(decoded, 5);
+  EXPECT_LT(decoded, 20);
+  const std::string notes = nlohmann::json(a.notes).dump();
+  EXPECT_NE(notes.find("20"), std::string::npos) << notes;  // the header's or the packets' claim, named
+  EXPECT_NE(notes.find(std::to_string(decoded) + " "), std::string::npos) << notes;
+  EXPECT_TRUE(take.read("A", static_cast<int>(decoded) - 1).ok());
+  const CameraImage past = take.read("A", 19);
+  EXPECT_FALSE(past.ok());
+  EXPECT_NE(past.dropped.find("A.avi"), std::string::npos) << past.dropped;
+  // B: 19 files, frame 107 missing: named once, not as hundreds of frames.
+  EXPECT_EQ(take.stream("B").source_frames.size(), 19u);
+  EXPECT_NE(nlohmann::json(take.stream("B").notes).dump().find("1 frame(s) missing"), std::string::npos);
+  EXPECT_EQ(take.frames().size(), 20u);  // B's 0..19 and A's first frames
+  const CameraImage hole = take.read("B", 7);
+  EXPECT_FALSE(hole.ok());
+  EXPECT_NE(hole.dropped.find("107.png"), std::string::npos) << hole.dropped;
+  EXPECT_TRUE(take.read("B", 8).ok());
+}
+
 // Real data as it ships (../shared/data): every view of Middlebury's temple and of the Oxford
 // dino is a one-frame camera read straight from its folder through a take.json that names the
 // files; nothing is renamed or copied.

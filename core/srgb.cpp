@@ -1,6 +1,7 @@
 #include "core/srgb.h"
 
 #include <cmath>
+#include <vector>
 
 namespace previz {
 namespace {
@@ -50,6 +51,31 @@ std::uint8_t linearToSrgb8(float linear) {
   for (int step = 128; step > 0; step >>= 1)
     if (level[i + step - 1] <= x) i += step;
   return static_cast<std::uint8_t>(i);
+}
+
+void linearToSrgb8(const float* linear, std::uint8_t* codes, size_t n) {
+  constexpr int kBins = 1 << 16;
+  // Per bin [b, b + 1) / kBins: its code, or 0xFFFF when a decision level falls inside it.
+  static const std::vector<std::uint16_t> table = [] {
+    std::vector<std::uint16_t> t(kBins);
+    for (int b = 0; b < kBins; ++b) {
+      const std::uint8_t lo = linearToSrgb8(static_cast<float>(b) / kBins);
+      const std::uint8_t hi = linearToSrgb8(std::nextafter(static_cast<float>(b + 1) / kBins, 0.0f));
+      t[b] = lo == hi ? lo : 0xFFFF;
+    }
+    return t;
+  }();
+  for (size_t i = 0; i < n; ++i) {
+    const float x = linear[i];
+    if (!(x > 0.0f)) {
+      codes[i] = 0;
+    } else if (x >= 1.0f) {
+      codes[i] = 255;
+    } else {
+      const std::uint16_t c = table[static_cast<int>(x * kBins)];
+      codes[i] = c != 0xFFFF ? static_cast<std::uint8_t>(c) : linearToSrgb8(x);
+    }
+  }
 }
 
 }  // namespace previz

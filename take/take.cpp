@@ -102,15 +102,14 @@ cv::Mat toBgr8(const cv::Mat& image, bool float_is_linear) {
     case CV_32F:
     case CV_64F: {
       cv::Mat f;
-      bgr.convertTo(f, CV_32F);
+      if (bgr.depth() == CV_32F && bgr.isContinuous()) f = bgr;
+      else bgr.convertTo(f, CV_32F);
       cv::Mat out(f.size(), CV_8UC3);
-      for (int y = 0; y < f.rows; ++y) {
-        const float* in = f.ptr<float>(y);
-        std::uint8_t* o = out.ptr<std::uint8_t>(y);
-        for (int i = 0; i < 3 * f.cols; ++i)
-          o[i] = float_is_linear ? linearToSrgb8(in[i])
-                                 : static_cast<std::uint8_t>(std::lround(255.0f * std::clamp(in[i], 0.0f, 1.0f)));
+      if (!float_is_linear) {
+        f.convertTo(out, CV_8U, 255.0);  // display-referred [0, 1]: rounded, saturated
+        return out;
       }
+      for (int y = 0; y < f.rows; ++y) linearToSrgb8(f.ptr<float>(y), out.ptr<std::uint8_t>(y), 3 * static_cast<size_t>(f.cols));
       return out;
     }
     default:
@@ -131,11 +130,9 @@ cv::Mat readImage8(const fs::path& path, std::string* format, int* bit_depth, st
     const int r = index("R"), g = index("G"), b = index("B"), y = index("Y");
     cv::Mat bgr;
     if (r >= 0 && g >= 0 && b >= 0) {
-      std::vector<cv::Mat> planes(3);
-      cv::extractChannel(exr.image, planes[0], b);
-      cv::extractChannel(exr.image, planes[1], g);
-      cv::extractChannel(exr.image, planes[2], r);
-      cv::merge(planes, bgr);
+      bgr.create(exr.image.size(), CV_32FC3);
+      const int from_to[] = {b, 0, g, 1, r, 2};
+      cv::mixChannels(&exr.image, 1, &bgr, 1, from_to, 3);
     } else if (y >= 0 || exr.channels.size() == 1) {
       cv::extractChannel(exr.image, bgr, std::max(y, 0));
     } else {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -59,6 +60,32 @@ TEST(Srgb, EncodeMatchesTheRoundedCurve) {
     checked += 2;
   }
   EXPECT_EQ(mismatches, 0) << "of " << checked;
+}
+
+// The table-driven batch encode gives the search's code for every value: around every decision
+// level, over uniform and log-uniform values, and out of range.
+TEST(Srgb, BatchEncodeEqualsTheSearch) {
+  std::vector<float> x;
+  for (int i = 0; i < 255; ++i) {
+    const double level = std::pow(((i + 0.5) / 255.0 + 0.055) / 1.055, 2.4);
+    const double toe = (i + 0.5) / 255.0 / 12.92;
+    float v = static_cast<float>((i + 0.5) / 255.0 <= 0.04045 ? toe : level);
+    for (int k = 0; k < 3; ++k) v = std::nextafter(v, 0.0f);
+    for (int k = 0; k < 7; ++k, v = std::nextafter(v, 1.0f)) x.push_back(v);
+  }
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> uniform(-0.1f, 1.1f), exponent(-12.0f, 0.0f);
+  for (int n = 0; n < 1000000; ++n) {
+    x.push_back(uniform(rng));
+    x.push_back(std::pow(10.0f, exponent(rng)));
+  }
+  x.push_back(std::numeric_limits<float>::quiet_NaN());
+  x.push_back(std::numeric_limits<float>::infinity());
+  std::vector<std::uint8_t> codes(x.size());
+  linearToSrgb8(x.data(), codes.data(), x.size());
+  size_t mismatches = 0;
+  for (size_t i = 0; i < x.size(); ++i) mismatches += codes[i] != linearToSrgb8(x[i]);
+  EXPECT_EQ(mismatches, 0u) << "of " << x.size();
 }
 
 TEST(Srgb, EncodeClampsOutOfRangeAndNan) {

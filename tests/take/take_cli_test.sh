@@ -51,6 +51,32 @@ import json,sys; j=json.load(open(sys.argv[1])); c={c['camera']:c for c in j['ca
 assert c['pattern']=='main_A001C003.%04d.png' and c['offset']==1001 and c['offset_from']=='take.json' and c['take_range']==[0,4], c" "$tmp/sinfo.json"
 then ok "take convert to {camera}_A001C003.#### from 1001"; else fail "take convert seq: $(cat "$tmp/conv2.err")"; fi
 
+# The studio writes those forms itself: FFV1 videos and float EXR sequences from 1001, each with
+# timecode, witness02 starting a frame late: the take model puts every camera in place.
+for form in "ffv1" "exr --pattern {camera}.#### --start-number 1001"; do
+  name="synth_${form%% *}"
+  if "$bin" synth --preset studio --out "$tmp/$name" --frames 3 --cams 3 --size 160x90 --no-meshes --quiet \
+       --format $form --timecode 10:00:00:00 --late witness02=1 > /dev/null 2> "$tmp/$name.err" \
+     && "$bin" take info "$tmp/$name" --json > "$tmp/$name.json" 2>> "$tmp/$name.err" \
+     && python3 - "$tmp/$name.json" "${form%% *}" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1])); form = sys.argv[2]
+c = {x["camera"]: x for x in j["cameras"]}
+assert not j["mismatches"] and j["frames"] == 3, j
+for name, x in c.items():
+    late = name == "witness02"
+    assert x["offset_from"] == "timecode" and x["take_range"] == [1 if late else 0, 2], x
+    assert x["start_timecode"] == ("10:00:00:01" if late else "10:00:00:00"), x
+    if form == "ffv1":
+        assert x["kind"] == "video" and x["format"] == "ffv1" and x["offset"] == (-1 if late else 0), x
+    else:
+        assert x["kind"] == "sequence" and x["pattern"] == name + ".%04d.exr" and x["bit_depth"] == 32, x
+        assert x["source_range"][0] == 1001 and x["offset"] == (1000 if late else 1001), x
+PY
+  then ok "synth --format ${form%% *} with timecode and a late camera: every camera in place"
+  else fail "synth $form: $(tail -3 "$tmp/$name.err")"; fi
+done
+
 # carve: bit-identical depth wherever the same cameras give the same pixels.
 carve() { "$bin" carve --take "$1" --rig "$rig" --main-poses "$poses" --voxel 0.02 --out "$2" --quiet --json > "$2.json" 2> "$2.err"; }
 carve "$take" "$tmp/c_png"; carve "$tmp/ffv1" "$tmp/c_ffv1"; carve "$tmp/seq" "$tmp/c_seq"

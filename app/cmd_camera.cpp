@@ -2,6 +2,7 @@
 // write ST maps for compositing packages.
 #include <filesystem>
 #include <iostream>
+#include <tuple>
 
 #include <nlohmann/json.hpp>
 
@@ -11,6 +12,7 @@
 #include "core/distortion_maps.h"
 #include "core/error.h"
 #include "core/rig.h"
+#include "core/rig_import.h"
 
 namespace previz::app {
 namespace {
@@ -19,39 +21,44 @@ namespace fs = std::filesystem;
 
 struct CameraArgs {
   // import
-  std::string krt, projection, size, out;
-  std::vector<std::string> opencv;
+  std::string krt, projection, kalibr, colmap, size, out, units = "m", flip = "none";
+  std::vector<std::string> opencv, names;
   // export / stmap / info
-  std::string rig, opencv_dir, krt_out, camera, stmap_dir;
+  std::string rig, opencv_dir, krt_out, projection_out, kalibr_out, colmap_out, camera, stmap_dir;
   double overscan = 0.0;
   bool json = false;
 };
 
 int runImport(const CameraArgs& a) {
-  const int sources = !a.krt.empty() + !a.projection.empty() + !a.opencv.empty();
-  if (sources != 1) {
-    throw Error("give exactly one of --krt, --projection, --opencv");
-  }
-  Rig rig;
+  const int sources = !a.krt.empty() + !a.projection.empty() + !a.opencv.empty() + !a.kalibr.empty() +
+                      !a.colmap.empty();
+  if (sources != 1) throw Error("give exactly one of --opencv, --kalibr, --colmap, --krt, --projection");
+  ImportOptions opt;
+  if (!a.size.empty()) std::tie(opt.width, opt.height) = parseSize(a.size, "--size");
+  opt.units = a.units;
+  opt.flip = a.flip;
+  opt.names = a.names;
+  RigImport imported;
   if (!a.opencv.empty()) {
-    for (const std::string& path : a.opencv) {
-      RigCamera rc;
-      rc.camera = readOpenCvCamera(path, fs::path(path).stem().string());
-      rig.cameras.push_back(rc);
-    }
+    imported = importOpenCv(std::vector<fs::path>(a.opencv.begin(), a.opencv.end()), opt);
+  } else if (!a.kalibr.empty()) {
+    imported = importKalibr(a.kalibr, opt);
+  } else if (!a.colmap.empty()) {
+    imported = importColmap(a.colmap, opt);
   } else {
-    if (a.size.empty()) {
+    if (a.size.empty())
       throw Error("K R t and P rows carry no image size: give --size WxH", fieldContext("--size"));
-    }
-    const auto [w, h] = parseSize(a.size, "--size");
-    rig = !a.krt.empty() ? readKRtRows(a.krt, w, h) : readProjectionRows(a.projection, w, h);
+    imported = !a.krt.empty() ? importKRtRows(a.krt, opt) : importProjectionRows(a.projection, opt);
   }
-  rig.validate();
-  writeRig(rig, a.out);
-  std::cerr << "camera import: " << rig.cameras.size() << " cameras -> " << a.out << "\n";
+  writeRig(imported.rig, a.out);
+  std::cerr << imported.report.fullReport();
+  std::cerr << "camera import: " << imported.rig.cameras.size() << " cameras -> " << a.out << "\n";
   if (a.json) {
-    std::cout << nlohmann::json{{"command", "camera import"}, {"cameras", rig.names()},
-                                {"out", a.out}}.dump()
+    std::cout << nlohmann::json{{"command", "camera import"},
+                                {"cameras", imported.rig.names()},
+                                {"out", a.out},
+                                {"report", imported.report.toJson()}}
+                     .dump()
               << "\n";
   }
   return 0;
@@ -59,20 +66,26 @@ int runImport(const CameraArgs& a) {
 
 int runExport(const CameraArgs& a) {
   const Rig rig = readRig(a.rig);
-  if (a.opencv_dir.empty() && a.krt_out.empty()) {
-    throw Error("give --opencv-dir and/or --krt-out");
-  }
+  if (a.opencv_dir.empty() && a.krt_out.empty() && a.projection_out.empty() && a.kalibr_out.empty() &&
+      a.colmap_out.empty())
+    throw Error("give one or more of --opencv-dir, --kalibr, --colmap, --krt-out, --projection-out");
   std::vector<std::string> written;
-  if (!a.opencv_dir.empty()) {
-    for (const RigCamera& rc : rig.cameras) {
-      const fs::path path = fs::path(a.opencv_dir) / (rc.camera.name + ".yaml");
-      writeOpenCvCamera(rc.camera, path);
-      written.push_back(path.string());
-    }
+  auto wrote = [&](const std::vector<fs::path>& files) {
+    for (const fs::path& f : files) written.push_back(f.string());
+  };
+  if (!a.opencv_dir.empty()) wrote(exportOpenCv(rig, a.opencv_dir));
+  if (!a.kalibr_out.empty()) {
+    exportKalibr(rig, a.kalibr_out);
+    written.push_back(a.kalibr_out);
   }
+  if (!a.colmap_out.empty()) wrote(exportColmap(rig, a.colmap_out));
   if (!a.krt_out.empty()) {
     writeKRtRows(rig, a.krt_out);
     written.push_back(a.krt_out);
+  }
+  if (!a.projection_out.empty()) {
+    writeProjectionRows(rig, a.projection_out);
+    written.push_back(a.projection_out);
   }
   for (const auto& w : written) std::cerr << "camera export: wrote " << w << "\n";
   if (a.json) std::cout << nlohmann::json{{"command", "camera export"}, {"files", written}}.dump() << "\n";
@@ -125,7 +138,10 @@ int runInfo(const CameraArgs& a) {
                     {"invertible_radius", std::isfinite(r_max) ? nlohmann::json(r_max) : nlohmann::json(nullptr)},
                     {"centre_m", {centre.x(), centre.y(), centre.z()}}});
   }
-  if (a.json) std::cout << nlohmann::json{{"command", "camera info"}, {"cameras", cams}}.dump() << "\n";
+  const std::vector<std::string> warnings = rigPoseWarnings(rig);
+  for (const std::string& w : warnings) std::cerr << "WARNING: " << w << "\n";
+  if (a.json)
+    std::cout << nlohmann::json{{"command", "camera info"}, {"cameras", cams}, {"warnings", warnings}}.dump() << "\n";
   return 0;
 }
 
@@ -134,21 +150,39 @@ int runInfo(const CameraArgs& a) {
 Runner addCameraCommand(CLI::App& app) {
   auto a = std::make_shared<CameraArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "camera", "Import/export cameras (OpenCV YAML, K R t rows, P matrices), ST maps, info");
+      "camera", "Import/export cameras (OpenCV, Kalibr, COLMAP, K R t rows, P matrices), ST maps, info");
   cmd->require_subcommand(1);
 
-  CLI::App* imp = cmd->add_subcommand("import", "Build a rig.json from another tool's cameras");
+  CLI::App* imp = cmd->add_subcommand(
+      "import", "Build a rig.json from another tool's cameras, poses included; prints what it assumed");
+  imp->add_option("--opencv", a->opencv,
+                  "OpenCV FileStorage files (YAML/XML/JSON): camera_matrix, distortion_coefficients, "
+                  "[image_width/height], [rvec+tvec | R+T]; or a stereo pair M1 D1 M2 D2 [R T]");
+  imp->add_option("--name", a->names, "Camera names, one per camera in reading order (default: file stem, "
+                                      "or its folder when stems repeat)");
+  imp->add_option("--kalibr", a->kalibr, "Kalibr camchain.yaml (pinhole-radtan, T_cn_cnm1 chain; cam0 = world)");
+  imp->add_option("--colmap", a->colmap, "COLMAP text model folder (cameras.txt + images.txt)");
   imp->add_option("--krt", a->krt, "Text rows: name k11..k33 r11..r33 t1 t2 t3 (Middlebury par.txt)");
   imp->add_option("--projection", a->projection, "Text rows: name p11..p34 (3x4 P = K[R|t])");
-  imp->add_option("--opencv", a->opencv, "OpenCV calibration YAML/XML files (one per camera)");
-  imp->add_option("--size", a->size, "Image size WxH (needed for --krt/--projection)");
+  imp->add_option("--size", a->size, "Image size WxH for files without one (rows; OpenCV files without image_width)");
+  imp->add_option("--units", a->units, "Unit of the file's translations")
+      ->check(CLI::IsMember({"mm", "cm", "m"}))
+      ->capture_default_str();
+  imp->add_option("--flip", a->flip,
+                  "The file's world axes, turned into previz's z up: y-up (x,y,z)->(x,-z,y), z-down "
+                  "(x,y,z)->(x,-y,-z), y-down (x,y,z)->(x,z,-y), none")
+      ->check(CLI::IsMember({"none", "y-up", "z-down", "y-down"}))
+      ->capture_default_str();
   imp->add_option("--out", a->out, "rig.json to write")->required();
-  imp->add_flag("--json", a->json, "JSON summary on stdout");
+  imp->add_flag("--json", a->json, "JSON summary (with the import report) on stdout");
 
-  CLI::App* exp = cmd->add_subcommand("export", "Write a rig's cameras for other tools");
+  CLI::App* exp = cmd->add_subcommand("export", "Write a rig's cameras, poses included, for other tools");
   exp->add_option("--rig", a->rig, "rig.json")->required()->check(CLI::ExistingFile);
-  exp->add_option("--opencv-dir", a->opencv_dir, "Folder for one OpenCV YAML per camera");
+  exp->add_option("--opencv-dir", a->opencv_dir, "Folder for one OpenCV YAML per camera (with rvec/tvec)");
+  exp->add_option("--kalibr", a->kalibr_out, "Kalibr camchain.yaml to write");
+  exp->add_option("--colmap", a->colmap_out, "Folder for a COLMAP text model (cameras/images/points3D.txt)");
   exp->add_option("--krt-out", a->krt_out, "K R t rows file to write");
+  exp->add_option("--projection-out", a->projection_out, "P rows file to write");
   exp->add_flag("--json", a->json, "JSON summary on stdout");
 
   CLI::App* st = cmd->add_subcommand("stmap", "Write undistort/distort ST maps (EXR) of a camera");

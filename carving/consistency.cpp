@@ -84,9 +84,22 @@ class Judge {
 #pragma omp parallel for schedule(dynamic) num_threads(threads())
     for (int c = 0; c < n; ++c) {
       Keyer keyer(o_.keyer);
-      bool plate_tried = false;
+      // A clean plate the keyer cannot use leaves the camera out, as carve does.
+      std::string unusable;
+      if (!take_.hasMasks()) {
+        try {
+          const cv::Mat clean = take_.cleanPlate(names_[c]);
+          if (!clean.empty()) keyer.setCleanPlate(clean, "clean plate of " + names_[c]);
+        } catch (const std::exception& e) {
+          unusable = std::string("clean plate unusable: ") + e.what();
+        }
+      }
       for (int f : frames) {
         if (sil_[c].count(f) || why_[c].count(f)) continue;
+        if (!unusable.empty()) {
+          why_[c][f] = unusable;
+          continue;
+        }
         try {
           const CameraFrame in = take_.read(names_[c], f);
           if (!in.ok()) {
@@ -94,14 +107,7 @@ class Judge {
             continue;
           }
           cv::Mat mask = in.mask;
-          if (mask.empty()) {
-            if (!plate_tried) {
-              plate_tried = true;
-              const cv::Mat clean = take_.cleanPlate(names_[c]);
-              if (!clean.empty()) keyer.setCleanPlate(clean, "clean plate of " + names_[c]);
-            }
-            mask = keyer.key(in.image, take_.source(names_[c], f)).silhouette;
-          }
+          if (mask.empty()) mask = keyer.key(in.image, take_.source(names_[c], f)).silhouette;
           const RigCamera rc = scaled(take_.rig().at(names_[c]));
           cv::Mat small;
           cv::resize(mask, small, cv::Size(rc.camera.width, rc.camera.height), 0, 0, cv::INTER_AREA);

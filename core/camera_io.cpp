@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/rig_import.h"
 
 namespace fs = std::filesystem;
 
@@ -32,11 +33,6 @@ std::string lowerExtension(const fs::path& p) {
   return e;
 }
 
-bool isRotation(const Eigen::Matrix3d& R, double tol) {
-  return R.allFinite() && (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <= tol &&
-         R.determinant() > 0.0;
-}
-
 RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                            int width, int height, const std::string& name) {
   RigCamera rc;
@@ -55,140 +51,155 @@ RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, c
   return rc;
 }
 
-// Text rows: yields (line number, tokens) for every non-empty, non-comment line.
-std::vector<std::pair<int, std::vector<std::string>>> readRows(const fs::path& path) {
-  std::istringstream in(readTextFile(path));
-  std::vector<std::pair<int, std::vector<std::string>>> rows;
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) line.erase(hash);
-    std::istringstream ls(line);
-    std::vector<std::string> tokens;
-    std::string tok;
-    while (ls >> tok) tokens.push_back(tok);
-    if (!tokens.empty()) rows.emplace_back(number, std::move(tokens));
-  }
-  return rows;
-}
-
-double parseNumber(const std::string& s, const fs::path& path, int line, const std::string& camera,
-                   const std::string& field) {
-  size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != s.size() || !std::isfinite(v))
-    throw Error("line " + std::to_string(line) + ": expected a finite number, got '" + s + "'",
-                context(path, camera, field));
-  return v;
-}
-
-// Middlebury-style rows may start with a line holding only the number of cameras.
-void skipCountLine(std::vector<std::pair<int, std::vector<std::string>>>& rows, const fs::path& path) {
-  if (rows.empty() || rows.front().second.size() != 1) return;
-  const std::string& s = rows.front().second[0];
-  if (s.find_first_not_of("0123456789") != std::string::npos)
-    throw Error("line " + std::to_string(rows.front().first) +
-                    ": a one-token line must be the camera count, got '" + s + "'",
-                context(path, "", "count"));
-  const long count = std::stol(s);
-  const int line = rows.front().first;
-  rows.erase(rows.begin());
-  if (count != static_cast<long>(rows.size()))
-    throw Error("line " + std::to_string(line) + ": the file announces " + std::to_string(count) +
-                    " cameras but holds " + std::to_string(rows.size()),
-                context(path, "", "count"));
-}
-
-void checkSize(int width, int height, const fs::path& path) {
-  if (width <= 0 || height <= 0)
-    throw Error("image size must be given and > 0 (got " + std::to_string(width) + "x" +
-                    std::to_string(height) + ")",
-                context(path, "", "width/height"));
-}
-
 }  // namespace
 
-Camera readOpenCvCamera(const fs::path& path, const std::string& name) {
+cv::FileStorage openOpenCvStorage(const fs::path& path) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error("camera file does not exist", context(path, name, ""));
-  Camera c;
-  c.name = name.empty() ? path.stem().string() : name;
-  cv::FileStorage fs;
+  if (!fs::is_regular_file(path, ec)) throw Error("camera file does not exist", context(path, "", ""));
+  std::string text = readTextFile(path);
+  const std::string ext = lowerExtension(path);
+  // OpenCV refuses YAML without its "%YAML:1.0" first line; ROS camera_info files and hand-written
+  // ones have none.
+  if ((ext == ".yml" || ext == ".yaml") && text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n" + text;
+  const int format = ext == ".json"  ? cv::FileStorage::FORMAT_JSON
+                     : ext == ".xml" ? cv::FileStorage::FORMAT_XML
+                                     : cv::FileStorage::FORMAT_AUTO;
+  cv::FileStorage store;
   try {
-    if (!fs.open(path.string(), cv::FileStorage::READ))
-      throw Error("cannot open as OpenCV FileStorage (YAML/XML/JSON)", context(path, c.name, ""));
+    if (!store.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | format))
+      throw Error("cannot open as OpenCV FileStorage (YAML/XML/JSON)", context(path, "", ""));
   } catch (const cv::Exception& e) {
-    throw Error(std::string("not a valid OpenCV FileStorage file: ") + e.what(), context(path, c.name, ""));
+    throw Error(std::string("not a valid OpenCV FileStorage file: ") + e.what(), context(path, "", ""));
   }
-  auto node = [&](const char* key, const char* expected) {
-    cv::FileNode n = fs[key];
-    if (n.empty()) throw Error(std::string("missing field, expected ") + expected, context(path, c.name, key));
-    return n;
+  return store;
+}
+
+Eigen::MatrixXd readOpenCvMatrix(const cv::FileNode& n, const fs::path& file, const std::string& camera,
+                                 const std::string& field) {
+  auto bad = [&](const std::string& what) { return Error(what, context(file, camera, field)); };
+  auto number = [&](const cv::FileNode& v) {
+    if (!v.isReal() && !v.isInt()) throw bad("expected numbers in the matrix");
+    const double x = static_cast<double>(v);
+    if (!std::isfinite(x)) throw bad("expected finite numbers in the matrix");
+    return x;
   };
+  std::vector<double> values;
+  int rows = 0, cols = 0;
+  if (n.isMap()) {
+    if (!n["rows"].isInt() || !n["cols"].isInt()) throw bad("expected a matrix with integer rows and cols");
+    rows = static_cast<int>(n["rows"]);
+    cols = static_cast<int>(n["cols"]);
+    if (n["dt"].isString() && static_cast<std::string>(n["dt"]).size() != 1)
+      throw bad("expected a one-channel matrix (dt '" + static_cast<std::string>(n["dt"]) + "')");
+    if (!n["data"].isSeq()) throw bad("expected a matrix with a data list");
+    for (const cv::FileNode& v : n["data"]) values.push_back(number(v));
+  } else if (n.isSeq()) {
+    for (const cv::FileNode& row : n) {
+      if (row.isSeq()) {
+        if (rows > 0 && static_cast<int>(row.size()) != cols) throw bad("rows of different lengths");
+        cols = static_cast<int>(row.size());
+        ++rows;
+        for (const cv::FileNode& v : row) values.push_back(number(v));
+      } else {
+        if (rows > 0) throw bad("expected a flat list or a list of rows");
+        values.push_back(number(row));
+      }
+    }
+    if (rows == 0) {  // a flat list: one row
+      rows = values.empty() ? 0 : 1;
+      cols = static_cast<int>(values.size());
+    }
+  } else {
+    throw bad("expected a matrix");
+  }
+  if (rows <= 0 || cols <= 0 || static_cast<size_t>(rows) * static_cast<size_t>(cols) != values.size())
+    throw bad("matrix data holds " + std::to_string(values.size()) + " values for " + std::to_string(rows) + "x" +
+              std::to_string(cols));
+  Eigen::MatrixXd M(rows, cols);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) M(r, c) = values[static_cast<size_t>(r) * cols + c];
+  return M;
+}
+
+Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, const std::string& name,
+                            const char* k_key, const char* d_key, int width, int height) {
+  Camera c;
+  c.name = name;
   try {
-    cv::FileNode w = node("image_width", "an integer");
-    cv::FileNode h = node("image_height", "an integer");
-    if (!w.isInt() || !h.isInt())
-      throw Error("expected integers", context(path, c.name, w.isInt() ? "image_height" : "image_width"));
-    c.width = static_cast<int>(w);
-    c.height = static_cast<int>(h);
+    if (!store["image_width"].empty() || !store["image_height"].empty()) {
+      for (const char* key : {"image_width", "image_height"})
+        if (!store[key].isInt()) throw Error("expected an integer", context(file, name, key));
+      c.width = static_cast<int>(store["image_width"]);
+      c.height = static_cast<int>(store["image_height"]);
+    } else if (width > 0 && height > 0) {
+      c.width = width;
+      c.height = height;
+    } else {
+      throw Error("no image size: the file has no image_width / image_height and none was given (--size WxH)",
+                  context(file, name, "image_width"));
+    }
 
-    cv::Mat K;
-    node("camera_matrix", "a 3x3 matrix (!!opencv-matrix)") >> K;
-    if (K.rows != 3 || K.cols != 3 || K.channels() != 1)
-      throw Error("expected a 3x3 matrix, got " + std::to_string(K.rows) + "x" + std::to_string(K.cols),
-                  context(path, c.name, "camera_matrix"));
-    K.convertTo(K, CV_64F);
-    const auto k = [&](int r, int col) { return K.at<double>(r, col); };
-    if (k(1, 0) != 0.0 || k(2, 0) != 0.0 || k(2, 1) != 0.0 || std::abs(k(2, 2) - 1.0) > 1e-12)
-      throw Error("expected an upper-triangular camera matrix [fx s cx; 0 fy cy; 0 0 1]",
-                  context(path, c.name, "camera_matrix"));
-    c.fx = k(0, 0);
-    c.skew = k(0, 1);
-    c.cx = k(0, 2);
-    c.fy = k(1, 1);
-    c.cy = k(1, 2);
+    if (store[k_key].empty())
+      throw Error("missing field, expected a 3x3 matrix (!!opencv-matrix)", context(file, name, k_key));
+    const Eigen::MatrixXd K = readOpenCvMatrix(store[k_key], file, name, k_key);
+    if (K.rows() != 3 || K.cols() != 3)
+      throw Error("expected a 3x3 matrix, got " + std::to_string(K.rows()) + "x" + std::to_string(K.cols()),
+                  context(file, name, k_key));
+    if (K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0 || std::abs(K(2, 2) - 1.0) > 1e-12)
+      throw Error("expected an upper-triangular camera matrix [fx s cx; 0 fy cy; 0 0 1]", context(file, name, k_key));
+    c.fx = K(0, 0);
+    c.skew = K(0, 1);
+    c.cx = K(0, 2);
+    c.fy = K(1, 1);
+    c.cy = K(1, 2);
 
-    cv::Mat D;
-    node("distortion_coefficients", "a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])") >> D;
-    if (D.empty() || (D.rows != 1 && D.cols != 1) || D.channels() != 1)
-      throw Error("expected a 1xN or Nx1 matrix", context(path, c.name, "distortion_coefficients"));
-    D.convertTo(D, CV_64F);
-    D = D.reshape(1, 1);
-    const int n = D.cols;
+    // ROS camera_info names its lens model; OpenCV's own files do not.
+    if (store["distortion_model"].isString()) {
+      const std::string model = store["distortion_model"];
+      if (model == "equidistant" || model == "fisheye")
+        throw Error("the fisheye (Kannala-Brandt) model is not supported yet", context(file, name, "distortion_model"));
+      if (model != "plumb_bob" && model != "rational_polynomial")
+        throw Error("unsupported distortion model '" + model + "' (plumb_bob: k1 k2 p1 p2 k3)",
+                    context(file, name, "distortion_model"));
+    }
+    if (store[d_key].empty())
+      throw Error("missing field, expected a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])", context(file, name, d_key));
+    const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
+    if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", context(file, name, d_key));
+    const Eigen::Index n = D.size();
     if (n < 4)
       throw Error("expected at least 4 coefficients (k1 k2 p1 p2), got " + std::to_string(n),
-                  context(path, c.name, "distortion_coefficients"));
-    for (int i = 5; i < n; ++i)
-      if (D.at<double>(0, i) != 0.0)
+                  context(file, name, d_key));
+    for (Eigen::Index i = 5; i < n; ++i)
+      if (D(i) != 0.0)
         throw Error("coefficient " + std::to_string(i) +
                         " is non-zero: rational / thin-prism / tilt terms are not supported "
                         "(model brown-conrady-opencv: k1 k2 p1 p2 k3)",
-                    context(path, c.name, "distortion_coefficients"));
-    c.dist.k1 = D.at<double>(0, 0);
-    c.dist.k2 = D.at<double>(0, 1);
-    c.dist.p1 = D.at<double>(0, 2);
-    c.dist.p2 = D.at<double>(0, 3);
-    c.dist.k3 = n > 4 ? D.at<double>(0, 4) : 0.0;
+                    context(file, name, d_key));
+    c.dist = {D(0), D(1), D(2), D(3), n > 4 ? D(4) : 0.0};
   } catch (const cv::Exception& e) {
-    throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), context(path, c.name, ""));
+    throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), context(file, name, ""));
   }
   try {
     c.validate();
   } catch (const Error& e) {
-    throw Error(e.message(), context(path, c.name, e.context().field));
+    throw Error(e.message(), context(file, name, e.context().field));
   }
   return c;
 }
 
-void writeOpenCvCamera(const Camera& camera, const fs::path& path) {
+Camera readOpenCvCamera(const fs::path& path, const std::string& name) {
+  const std::string n = name.empty() ? path.stem().string() : name;
+  try {
+    return readOpenCvIntrinsics(openOpenCvStorage(path), path, n, "camera_matrix", "distortion_coefficients");
+  } catch (const Error& e) {
+    throw Error(e.message(), context(path, n, e.context().field));
+  }
+}
+
+namespace {
+
+void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& path) {
   try {
     camera.validate();
   } catch (const Error& e) {
@@ -202,24 +213,41 @@ void writeOpenCvCamera(const Camera& camera, const fs::path& path) {
     throw Error("unknown extension '" + ext + "': use .yml, .yaml, .xml or .json", context(path, camera.name, ""));
   std::string text;
   try {
-    cv::FileStorage fs(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | format);
+    cv::FileStorage store(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | format);
     if (format != cv::FileStorage::FORMAT_JSON)
-      fs.writeComment("previz camera '" + camera.name +
-                      "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3); pixel (0,0) is the centre of the "
-                      "top-left pixel");
-    fs << "image_width" << camera.width;
-    fs << "image_height" << camera.height;
+      store.writeComment("previz camera '" + camera.name +
+                         "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3); pixel (0,0) is the centre of the "
+                         "top-left pixel" +
+                         (T_world_cam ? "; rvec/tvec map world to camera (x_cam = R x_world + t), metres, "
+                                        "world z up"
+                                      : ""));
+    store << "image_width" << camera.width;
+    store << "image_height" << camera.height;
     cv::Mat K = (cv::Mat_<double>(3, 3) << camera.fx, camera.skew, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1);
     // 5x1, as cv::calibrateCamera returns it.
     cv::Mat D = (cv::Mat_<double>(5, 1) << camera.dist.k1, camera.dist.k2, camera.dist.p1, camera.dist.p2,
                  camera.dist.k3);
-    fs << "camera_matrix" << K;
-    fs << "distortion_coefficients" << D;
-    text = fs.releaseAndGetString();
+    store << "camera_matrix" << K;
+    store << "distortion_coefficients" << D;
+    if (T_world_cam) {
+      Eigen::Vector3d rvec, tvec;
+      poseToRvecTvec(T_world_cam->inverse(), rvec, tvec);
+      store << "rvec" << (cv::Mat_<double>(3, 1) << rvec.x(), rvec.y(), rvec.z());
+      store << "tvec" << (cv::Mat_<double>(3, 1) << tvec.x(), tvec.y(), tvec.z());
+    }
+    text = store.releaseAndGetString();
   } catch (const cv::Exception& e) {
     throw Error(std::string("cannot encode camera: ") + e.what(), context(path, camera.name, ""));
   }
   writeFileAtomic(path, text);
+}
+
+}  // namespace
+
+void writeOpenCvCamera(const Camera& camera, const fs::path& path) { writeOpenCv(camera, nullptr, path); }
+
+void writeOpenCvCamera(const RigCamera& camera, const fs::path& path) {
+  writeOpenCv(camera.camera, &camera.T_world_cam, path);
 }
 
 RigCamera rigCameraFromProjection(const Eigen::Matrix<double, 3, 4>& P_in, int width, int height,
@@ -269,96 +297,65 @@ Eigen::Matrix<double, 3, 4> projectionMatrix(const RigCamera& camera) {
 }
 
 Rig readKRtRows(const fs::path& path, int width, int height) {
-  checkSize(width, height, path);
-  auto rows = readRows(path);
-  skipCountLine(rows, path);
-  Rig rig;
-  for (const auto& [line, tok] : rows) {
-    const std::string& name = tok[0];
-    if (tok.size() != 22)
-      throw Error("line " + std::to_string(line) + ": expected 22 fields (name k11..k33 r11..r33 t1 t2 t3), got " +
-                      std::to_string(tok.size()),
-                  context(path, name, "row"));
-    double v[21];
-    for (int i = 0; i < 21; ++i) {
-      const char* group = i < 9 ? "K" : i < 18 ? "R" : "t";
-      v[i] = parseNumber(tok[i + 1], path, line, name, group);
-    }
-    Eigen::Matrix3d K, R;
-    K << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
-    R << v[9], v[10], v[11], v[12], v[13], v[14], v[15], v[16], v[17];
-    const Eigen::Vector3d t(v[18], v[19], v[20]);
-    if (K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0 || K(2, 2) != 1.0)
-      throw Error("line " + std::to_string(line) + ": expected K = [fx s cx; 0 fy cy; 0 0 1]", context(path, name, "K"));
-    if (!isRotation(R, 1e-6))
-      throw Error("line " + std::to_string(line) + ": R is not a proper rotation (R^T R = I within 1e-6, det +1)",
-                  context(path, name, "R"));
-    rig.cameras.push_back(rigCameraFromKRt(K, R, t, width, height, name));
-    try {
-      rig.cameras.back().camera.validate();
-    } catch (const Error& e) {
-      throw Error("line " + std::to_string(line) + ": " + e.message(), context(path, name, e.context().field));
-    }
-  }
-  try {
-    rig.validate();
-  } catch (const Error& e) {
-    throw Error(e.message(), context(path, e.context().camera, e.context().field));
-  }
-  return rig;
+  ImportOptions opt;
+  opt.width = width;
+  opt.height = height;
+  return importKRtRows(path, opt).rig;
 }
 
 Rig readProjectionRows(const fs::path& path, int width, int height) {
-  checkSize(width, height, path);
-  auto rows = readRows(path);
-  skipCountLine(rows, path);
-  Rig rig;
-  for (const auto& [line, tok] : rows) {
-    const std::string& name = tok[0];
-    if (tok.size() != 13)
-      throw Error("line " + std::to_string(line) + ": expected 13 fields (name p11..p34), got " +
-                      std::to_string(tok.size()),
-                  context(path, name, "row"));
-    Eigen::Matrix<double, 3, 4> P;
-    for (int i = 0; i < 12; ++i) P(i / 4, i % 4) = parseNumber(tok[i + 1], path, line, name, "P");
-    try {
-      rig.cameras.push_back(rigCameraFromProjection(P, width, height, name));
-      rig.cameras.back().camera.validate();
-    } catch (const Error& e) {
-      throw Error("line " + std::to_string(line) + ": " + e.message(), context(path, name, e.context().field));
-    }
-  }
-  try {
-    rig.validate();
-  } catch (const Error& e) {
-    throw Error(e.message(), context(path, e.context().camera, e.context().field));
-  }
-  return rig;
+  ImportOptions opt;
+  opt.width = width;
+  opt.height = height;
+  return importProjectionRows(path, opt).rig;
 }
 
-void writeKRtRows(const Rig& rig, const fs::path& path) {
+namespace {
+
+// One camera a line after a header comment and the count line (Middlebury's layout).
+template <typename Row>
+void writeRows(const Rig& rig, const fs::path& path, const std::string& header, Row row) {
   std::ostringstream out;
-  out << "# previz KRt rows: name k11..k33 r11..r33 t1 t2 t3; P = K [R | t] maps world to pixels,\n"
-         "# pixel (0,0) is the centre of the top-left pixel; metres; no distortion\n";
-  out << rig.cameras.size() << "\n";
-  out << std::setprecision(17);
+  out << header << rig.cameras.size() << "\n" << std::setprecision(17);
   for (const auto& rc : rig.cameras) {
     const Camera& c = rc.camera;
-    if (!c.dist.isZero())
-      throw Error("KRt rows cannot hold lens distortion", context(path, c.name, "distortion"));
-    if (c.name.empty() || c.name.find_first_of(" \t#\n") != std::string::npos)
-      throw Error("camera names in KRt rows must be non-empty without spaces or '#'", context(path, c.name, "name"));
-    const Eigen::Matrix3d K = c.K();
-    const Pose T = rc.T_world_cam.inverse();
+    if (!c.dist.isZero()) throw Error("rows cannot hold lens distortion", context(path, c.name, "distortion"));
+    if (c.name.empty() || c.name.find_first_of(" \t#\r\n") != std::string::npos)
+      throw Error("camera names in rows must be non-empty without spaces or '#'", context(path, c.name, "name"));
     out << c.name;
-    for (int r = 0; r < 3; ++r)
-      for (int col = 0; col < 3; ++col) out << ' ' << K(r, col);
-    for (int r = 0; r < 3; ++r)
-      for (int col = 0; col < 3; ++col) out << ' ' << T.linear()(r, col);
-    for (int i = 0; i < 3; ++i) out << ' ' << T.translation()(i);
+    row(out, rc);
     out << '\n';
   }
   writeFileAtomic(path, out.str());
 }
 
+}  // namespace
+
+void writeKRtRows(const Rig& rig, const fs::path& path) {
+  writeRows(rig, path,
+            "# previz KRt rows: name k11..k33 r11..r33 t1 t2 t3; x_cam = R x_world + t, P = K [R | t] maps\n"
+            "# world to pixels, pixel (0,0) is the centre of the top-left pixel; metres; no distortion\n",
+            [](std::ostream& out, const RigCamera& rc) {
+              const Eigen::Matrix3d K = rc.camera.K();
+              const Pose T = rc.T_world_cam.inverse();
+              for (int r = 0; r < 3; ++r)
+                for (int col = 0; col < 3; ++col) out << ' ' << K(r, col);
+              for (int r = 0; r < 3; ++r)
+                for (int col = 0; col < 3; ++col) out << ' ' << T.linear()(r, col);
+              for (int i = 0; i < 3; ++i) out << ' ' << T.translation()(i);
+            });
+}
+
+void writeProjectionRows(const Rig& rig, const fs::path& path) {
+  writeRows(rig, path,
+            "# previz P rows: name p11..p34; P = K [R | t] maps world points (metres) to pixels,\n"
+            "# pixel (0,0) is the centre of the top-left pixel; no distortion\n",
+            [](std::ostream& out, const RigCamera& rc) {
+              const Eigen::Matrix<double, 3, 4> P = projectionMatrix(rc);
+              for (int r = 0; r < 3; ++r)
+                for (int col = 0; col < 4; ++col) out << ' ' << P(r, col);
+            });
+}
+
 }  // namespace previz
+

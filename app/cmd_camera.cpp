@@ -2,6 +2,7 @@
 // write ST maps for compositing packages.
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
@@ -13,6 +14,7 @@
 #include "core/error.h"
 #include "core/rig.h"
 #include "core/rig_import.h"
+#include "take/take.h"
 
 namespace previz::app {
 namespace {
@@ -21,7 +23,7 @@ namespace fs = std::filesystem;
 
 struct CameraArgs {
   // import
-  std::string krt, projection, kalibr, colmap, size, out, units = "m", flip = "none";
+  std::string krt, projection, kalibr, colmap, size, take, out, units = "m", flip = "none";
   std::vector<std::string> opencv, names;
   // export / stmap / info
   std::string rig, opencv_dir, krt_out, projection_out, kalibr_out, colmap_out, camera, stmap_dir;
@@ -35,6 +37,19 @@ int runImport(const CameraArgs& a) {
   if (sources != 1) throw Error("give exactly one of --opencv, --kalibr, --colmap, --krt, --projection");
   ImportOptions opt;
   if (!a.size.empty()) std::tie(opt.width, opt.height) = parseSize(a.size, "--size");
+  // Sizes the files lack from the take's images of each camera (take/take.h: its first frame).
+  if (!a.take.empty()) {
+    if (!fs::is_directory(a.take)) throw Error("take folder not found", fileContext(a.take, "--take"));
+    const fs::path dir = a.take;
+    opt.size_of = [dir](const std::string& camera) -> std::optional<std::pair<int, int>> {
+      take::TakeOptions one;
+      one.cameras = {camera};
+      const take::Take t(dir, one);
+      const take::CameraStream& s = t.stream(camera);
+      if (!s.usable() || s.width <= 0) return std::nullopt;
+      return std::make_pair(s.width, s.height);
+    };
+  }
   opt.units = a.units;
   opt.flip = a.flip;
   opt.names = a.names;
@@ -46,8 +61,8 @@ int runImport(const CameraArgs& a) {
   } else if (!a.colmap.empty()) {
     imported = importColmap(a.colmap, opt);
   } else {
-    if (a.size.empty())
-      throw Error("K R t and P rows carry no image size: give --size WxH", fieldContext("--size"));
+    if (a.size.empty() && a.take.empty())
+      throw Error("K R t and P rows carry no image size: give --size WxH or --take DIR", fieldContext("--size"));
     imported = !a.krt.empty() ? importKRtRows(a.krt, opt) : importProjectionRows(a.projection, opt);
   }
   writeRig(imported.rig, a.out);
@@ -165,6 +180,8 @@ Runner addCameraCommand(CLI::App& app) {
   imp->add_option("--krt", a->krt, "Text rows: name k11..k33 r11..r33 t1 t2 t3 (Middlebury par.txt)");
   imp->add_option("--projection", a->projection, "Text rows: name p11..p34 (3x4 P = K[R|t])");
   imp->add_option("--size", a->size, "Image size WxH for files without one (rows; OpenCV files without image_width)");
+  imp->add_option("--take", a->take,
+                  "Else each camera's size from its images in this take folder (docs/formats.md \"Take folder\")");
   imp->add_option("--units", a->units, "Unit of the file's translations")
       ->check(CLI::IsMember({"mm", "cm", "m"}))
       ->capture_default_str();

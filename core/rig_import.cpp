@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <tuple>
 
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
@@ -217,14 +218,25 @@ std::vector<std::string> fileCameraNames(const std::vector<fs::path>& files) {
   return names;
 }
 
+// The size a file without one gives its camera: --size, else the camera's images (size_of);
+// (0, 0) when neither knows it.
+std::pair<int, int> givenSize(const ImportOptions& opt, const std::string& camera) {
+  if (opt.width > 0) return {opt.width, opt.height};
+  if (opt.size_of)
+    if (const std::optional<std::pair<int, int>> s = opt.size_of(camera)) return *s;
+  return {0, 0};
+}
+
 // The intrinsics under k_key / d_key, the image size's origin said in the report.
 Camera readCamera(const cv::FileStorage& store, const fs::path& file, const std::string& name, const char* k_key,
                   const char* d_key, const ImportOptions& opt, ImportReport& report) {
   const bool sized = has(store, "image_width") || has(store, "image_height");
-  Camera c = readOpenCvIntrinsics(store, file, name, k_key, d_key, opt.width, opt.height);
+  const auto [w, h] = givenSize(opt, name);
+  Camera c = readOpenCvIntrinsics(store, file, name, k_key, d_key, w, h);
   const std::string size = std::to_string(c.width) + "x" + std::to_string(c.height);
   if (!sized)
-    report.assumptions.push_back("camera '" + name + "': image size " + size + " as given (the file has none)");
+    report.assumptions.push_back("camera '" + name + "': image size " + size +
+                                 (opt.width > 0 ? " as given" : " from its images") + " (the file has none)");
   else if (opt.width > 0 && (opt.width != c.width || opt.height != c.height))
     report.warnings.push_back("camera '" + name + "': the file says " + size + ", the given size is " +
                               std::to_string(opt.width) + "x" + std::to_string(opt.height) + "; the file's size is used");
@@ -1111,8 +1123,8 @@ struct CameraRow {
 std::vector<CameraRow> readCameraRows(const fs::path& path, const ImportOptions& opt, size_t fields,
                                       const char* layout, RigImport& out) {
   opt.validate();
-  if (opt.width <= 0)
-    throw Error("rows carry no image size: give one (--size WxH)", context(path, "", "width/height"));
+  if (opt.width <= 0 && !opt.size_of)
+    throw Error("rows carry no image size: give one (--size WxH, or --take)", context(path, "", "width/height"));
   out.report.files.push_back(path.string());
   auto rows = readRows(path);
   skipCountLine(rows, path);
@@ -1126,10 +1138,21 @@ std::vector<CameraRow> readCameraRows(const fs::path& path, const ImportOptions&
                   context(path, name, "row"));
     out_rows.push_back({line, name, std::move(tok)});
   }
-  out.report.assumptions.push_back("image size " + std::to_string(opt.width) + "x" + std::to_string(opt.height) +
-                                   " as given (rows carry none); no distortion (rows carry none)");
+  out.report.assumptions.push_back(
+      (opt.width > 0 ? "image size " + std::to_string(opt.width) + "x" + std::to_string(opt.height) + " as given"
+                     : std::string("image sizes from each camera's images")) +
+      " (rows carry none); no distortion (rows carry none)");
   out.report.assumptions.push_back("pixels: (0,0) at the centre of the top-left pixel, as OpenCV");
   return out_rows;
+}
+
+// A row's image size: --size, else its camera's images; an Error naming the camera when neither.
+std::pair<int, int> rowSize(const ImportOptions& opt, const fs::path& path, const CameraRow& row) {
+  const std::pair<int, int> s = givenSize(opt, row.name);
+  if (s.first <= 0)
+    throw Error(lineTag(row.line) + "no image size for this camera: the take has no image of it (give --size WxH)",
+                context(path, row.name, "width/height"));
+  return s;
 }
 
 // An Error from one row, with its line, file and camera.
@@ -1176,8 +1199,7 @@ RigImport importRows(const fs::path& path, const ImportOptions& opt, bool krt) {
         if (K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0 || K(2, 2) != 1.0)
           throw Error("expected K = [fx s cx; 0 fy cy; 0 0 1]", context(path, row.name, "K"));
         rc.camera.name = row.name;
-        rc.camera.width = opt.width;
-        rc.camera.height = opt.height;
+        std::tie(rc.camera.width, rc.camera.height) = rowSize(opt, path, row);
         rc.camera.fx = K(0, 0);
         rc.camera.fy = K(1, 1);
         rc.camera.cx = K(0, 2);
@@ -1214,7 +1236,8 @@ RigImport importRows(const fs::path& path, const ImportOptions& opt, bool krt) {
   for (size_t i = 0; i < rows.size(); ++i) {
     try {
       // The RQ decomposition returns a rotation to machine precision: the rotation rule holds.
-      RigCamera rc = rigCameraFromProjection(Ps[i], opt.width, opt.height, rows[i].name);
+      const auto [w, h] = rowSize(opt, path, rows[i]);
+      RigCamera rc = rigCameraFromProjection(Ps[i], w, h, rows[i].name);
       rc.camera.validate();
       out.rig.cameras.push_back(std::move(rc));
     } catch (const Error& e) {

@@ -10,6 +10,9 @@
 // centre of the top-left pixel. Readers throw Error naming file, camera and field.
 // The formats and their conventions: docs/formats.md, "Camera exchange".
 #include <filesystem>
+#include <functional>
+#include <optional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -24,6 +27,9 @@ struct ImportOptions {
   // image_height, the stereo sample's M1 D1 M2 D2); 0 = not given. A file's own size wins.
   int width = 0;
   int height = 0;
+  // Else the size of the named camera's images, when the caller knows them (`camera import
+  // --take`: the take's first frame of that camera); nullopt = unknown.
+  std::function<std::optional<std::pair<int, int>>(const std::string& camera)> size_of;
   // Unit of the file's translations: "m", "cm" or "mm"; the rig gets metres.
   std::string units = "m";
   // The file's world axes, turned into previz's z-up world by a rotation about x:

@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/camera_io.h"
+#include "core/rig_import.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/srgb.h"
@@ -300,6 +301,37 @@ TEST(TakeModel, ACutVideoAndAHoledSequenceListWhatIsThere) {
   EXPECT_FALSE(hole.ok());
   EXPECT_NE(hole.dropped.find("107.png"), std::string::npos) << hole.dropped;
   EXPECT_TRUE(take.read("B", 8).ok());
+}
+
+// `camera import --take`: rows that carry no image size take each camera's from its images in
+// the take (Middlebury's K R t rows and views, through take.json "sources").
+TEST(TakeModel, ImportedRowsTakeEachCamerasSizeFromTheTake) {
+  const fs::path data(PREVIZ_SHARED_DATA);
+  ASSERT_TRUE(fs::exists(data / "middlebury-temple" / "templeSR_par.txt")) << "real data missing: " << data;
+  const fs::path dir = test::scratchDir("take", "import_sizes");
+  writeJsonAtomic(dir / "take.json", {{"sources", {{"*", (data / "middlebury-temple" / "{camera}").string()}}}});
+  ImportOptions o;
+  o.size_of = [&](const std::string& camera) -> std::optional<std::pair<int, int>> {
+    TakeOptions one;
+    one.cameras = {camera};
+    const Take t(dir, one);
+    if (!t.stream(camera).usable()) return std::nullopt;
+    return std::make_pair(t.stream(camera).width, t.stream(camera).height);
+  };
+  const RigImport imported = importKRtRows(data / "middlebury-temple" / "templeSR_par.txt", o);
+  ASSERT_EQ(imported.rig.cameras.size(), 16u);
+  for (const RigCamera& rc : imported.rig.cameras) {
+    EXPECT_EQ(rc.camera.width, 640) << rc.camera.name;
+    EXPECT_EQ(rc.camera.height, 480) << rc.camera.name;
+  }
+  // A camera the take has no image of is named.
+  writeJsonAtomic(dir / "take.json", {{"sources", {{"templeSR0001.png", (data / "middlebury-temple" / "templeSR0001.png").string()}}}});
+  try {
+    importKRtRows(data / "middlebury-temple" / "templeSR_par.txt", o);
+    FAIL() << "a camera without a size imported";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().camera, "templeSR0002.png") << e.what();
+  }
 }
 
 // Real data as it ships (../shared/data): every view of Middlebury's temple and of the Oxford

@@ -2,7 +2,6 @@
 #include "carving/take.h"
 
 #include <algorithm>
-#include <cctype>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -34,18 +33,10 @@ std::string frameName(int frame) {
   return name;
 }
 
-// Frame numbers of the %06d.png mattes in a folder (names that are all digits).
+// Frame numbers of the %06d.png mattes in a folder.
 void collectMaskFrames(const fs::path& dir, std::set<int>& frames) {
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) return;
-  for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    const fs::path& p = entry.path();
-    const std::string stem = p.stem().string();
-    if (p.extension() != ".png" || stem.empty() || stem.size() > 9) continue;
-    if (!std::all_of(stem.begin(), stem.end(), [](unsigned char c) { return std::isdigit(c); }))
-      continue;
-    frames.insert(std::stoi(stem));
-  }
+  static const take::SequencePattern kMasks = *take::parsePattern("%06d.png");
+  for (long long f : take::framesOf(dir, kMasks)) frames.insert(static_cast<int>(f));
 }
 
 // Number of fields on the first camera row of a text rig (comments, blank lines and an

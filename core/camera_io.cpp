@@ -19,14 +19,6 @@ namespace previz {
 
 namespace {
 
-ErrorContext context(const fs::path& file, const std::string& camera, const std::string& field) {
-  ErrorContext c;
-  c.file = file.string();
-  c.camera = camera;
-  c.field = field;
-  return c;
-}
-
 std::string lowerExtension(const fs::path& p) {
   std::string e = p.extension().string();
   for (auto& ch : e) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
@@ -55,7 +47,7 @@ RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, c
 
 cv::FileStorage openOpenCvStorage(const fs::path& path) {
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw Error("camera file does not exist", context(path, "", ""));
+  if (!fs::is_regular_file(path, ec)) throw Error("camera file does not exist", cameraFileContext(path, "", ""));
   std::string text = readTextFile(path);
   const std::string ext = lowerExtension(path);
   // OpenCV refuses YAML without its "%YAML:1.0" first line; ROS camera_info files and hand-written
@@ -67,16 +59,16 @@ cv::FileStorage openOpenCvStorage(const fs::path& path) {
   cv::FileStorage store;
   try {
     if (!store.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | format))
-      throw Error("cannot open as OpenCV FileStorage (YAML/XML/JSON)", context(path, "", ""));
+      throw Error("cannot open as OpenCV FileStorage (YAML/XML/JSON)", cameraFileContext(path, "", ""));
   } catch (const cv::Exception& e) {
-    throw Error(std::string("not a valid OpenCV FileStorage file: ") + e.what(), context(path, "", ""));
+    throw Error(std::string("not a valid OpenCV FileStorage file: ") + e.what(), cameraFileContext(path, "", ""));
   }
   return store;
 }
 
 Eigen::MatrixXd readOpenCvMatrix(const cv::FileNode& n, const fs::path& file, const std::string& camera,
                                  const std::string& field) {
-  auto bad = [&](const std::string& what) { return Error(what, context(file, camera, field)); };
+  auto bad = [&](const std::string& what) { return Error(what, cameraFileContext(file, camera, field)); };
   auto number = [&](const cv::FileNode& v) {
     if (!v.isReal() && !v.isInt()) throw bad("expected numbers in the matrix");
     const double x = static_cast<double>(v);
@@ -128,7 +120,7 @@ Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, 
   try {
     if (!store["image_width"].empty() || !store["image_height"].empty()) {
       for (const char* key : {"image_width", "image_height"})
-        if (!store[key].isInt()) throw Error("expected an integer", context(file, name, key));
+        if (!store[key].isInt()) throw Error("expected an integer", cameraFileContext(file, name, key));
       c.width = static_cast<int>(store["image_width"]);
       c.height = static_cast<int>(store["image_height"]);
     } else if (width > 0 && height > 0) {
@@ -136,17 +128,17 @@ Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, 
       c.height = height;
     } else {
       throw Error("no image size: the file has no image_width / image_height and none was given (--size WxH)",
-                  context(file, name, "image_width"));
+                  cameraFileContext(file, name, "image_width"));
     }
 
     if (store[k_key].empty())
-      throw Error("missing field, expected a 3x3 matrix (!!opencv-matrix)", context(file, name, k_key));
+      throw Error("missing field, expected a 3x3 matrix (!!opencv-matrix)", cameraFileContext(file, name, k_key));
     const Eigen::MatrixXd K = readOpenCvMatrix(store[k_key], file, name, k_key);
     if (K.rows() != 3 || K.cols() != 3)
       throw Error("expected a 3x3 matrix, got " + std::to_string(K.rows()) + "x" + std::to_string(K.cols()),
-                  context(file, name, k_key));
+                  cameraFileContext(file, name, k_key));
     if (K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0 || std::abs(K(2, 2) - 1.0) > 1e-12)
-      throw Error("expected an upper-triangular camera matrix [fx s cx; 0 fy cy; 0 0 1]", context(file, name, k_key));
+      throw Error("expected an upper-triangular camera matrix [fx s cx; 0 fy cy; 0 0 1]", cameraFileContext(file, name, k_key));
     c.fx = K(0, 0);
     c.skew = K(0, 1);
     c.cx = K(0, 2);
@@ -157,33 +149,33 @@ Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, 
     if (store["distortion_model"].isString()) {
       const std::string model = store["distortion_model"];
       if (model == "equidistant" || model == "fisheye")
-        throw Error("the fisheye (Kannala-Brandt) model is not supported yet", context(file, name, "distortion_model"));
+        throw Error("the fisheye (Kannala-Brandt) model is not supported yet", cameraFileContext(file, name, "distortion_model"));
       if (model != "plumb_bob" && model != "rational_polynomial")
         throw Error("unsupported distortion model '" + model + "' (plumb_bob: k1 k2 p1 p2 k3)",
-                    context(file, name, "distortion_model"));
+                    cameraFileContext(file, name, "distortion_model"));
     }
     if (store[d_key].empty())
-      throw Error("missing field, expected a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])", context(file, name, d_key));
+      throw Error("missing field, expected a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])", cameraFileContext(file, name, d_key));
     const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
-    if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", context(file, name, d_key));
+    if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", cameraFileContext(file, name, d_key));
     const Eigen::Index n = D.size();
     if (n < 4)
       throw Error("expected at least 4 coefficients (k1 k2 p1 p2), got " + std::to_string(n),
-                  context(file, name, d_key));
+                  cameraFileContext(file, name, d_key));
     for (Eigen::Index i = 5; i < n; ++i)
       if (D(i) != 0.0)
         throw Error("coefficient " + std::to_string(i) +
                         " is non-zero: rational / thin-prism / tilt terms are not supported "
                         "(model brown-conrady-opencv: k1 k2 p1 p2 k3)",
-                    context(file, name, d_key));
+                    cameraFileContext(file, name, d_key));
     c.dist = {D(0), D(1), D(2), D(3), n > 4 ? D(4) : 0.0};
   } catch (const cv::Exception& e) {
-    throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), context(file, name, ""));
+    throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), cameraFileContext(file, name, ""));
   }
   try {
     c.validate();
   } catch (const Error& e) {
-    throw Error(e.message(), context(file, name, e.context().field));
+    throw Error(e.message(), cameraFileContext(file, name, e.context().field));
   }
   return c;
 }
@@ -193,7 +185,7 @@ Camera readOpenCvCamera(const fs::path& path, const std::string& name) {
   try {
     return readOpenCvIntrinsics(openOpenCvStorage(path), path, n, "camera_matrix", "distortion_coefficients");
   } catch (const Error& e) {
-    throw Error(e.message(), context(path, n, e.context().field));
+    throw Error(e.message(), cameraFileContext(path, n, e.context().field));
   }
 }
 
@@ -203,14 +195,14 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
   try {
     camera.validate();
   } catch (const Error& e) {
-    throw Error(e.message(), context(path, camera.name, e.context().field));
+    throw Error(e.message(), cameraFileContext(path, camera.name, e.context().field));
   }
   const std::string ext = lowerExtension(path);
   int format = cv::FileStorage::FORMAT_YAML;
   if (ext == ".xml") format = cv::FileStorage::FORMAT_XML;
   else if (ext == ".json") format = cv::FileStorage::FORMAT_JSON;
   else if (ext != ".yml" && ext != ".yaml")
-    throw Error("unknown extension '" + ext + "': use .yml, .yaml, .xml or .json", context(path, camera.name, ""));
+    throw Error("unknown extension '" + ext + "': use .yml, .yaml, .xml or .json", cameraFileContext(path, camera.name, ""));
   std::string text;
   try {
     cv::FileStorage store(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | format);
@@ -237,7 +229,7 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
     }
     text = store.releaseAndGetString();
   } catch (const cv::Exception& e) {
-    throw Error(std::string("cannot encode camera: ") + e.what(), context(path, camera.name, ""));
+    throw Error(std::string("cannot encode camera: ") + e.what(), cameraFileContext(path, camera.name, ""));
   }
   writeFileAtomic(path, text);
 }
@@ -319,9 +311,9 @@ void writeRows(const Rig& rig, const fs::path& path, const std::string& header, 
   out << header << rig.cameras.size() << "\n" << std::setprecision(17);
   for (const auto& rc : rig.cameras) {
     const Camera& c = rc.camera;
-    if (!c.dist.isZero()) throw Error("rows cannot hold lens distortion", context(path, c.name, "distortion"));
+    if (!c.dist.isZero()) throw Error("rows cannot hold lens distortion", cameraFileContext(path, c.name, "distortion"));
     if (c.name.empty() || c.name.find_first_of(" \t#\r\n") != std::string::npos)
-      throw Error("camera names in rows must be non-empty without spaces or '#'", context(path, c.name, "name"));
+      throw Error("camera names in rows must be non-empty without spaces or '#'", cameraFileContext(path, c.name, "name"));
     out << c.name;
     row(out, rc);
     out << '\n';

@@ -22,6 +22,14 @@ inline ErrorContext fileContext(const std::string& file, const std::string& fiel
   c.field = field;
   return c;
 }
+// A file, a camera in it (or the camera it describes) and a field.
+inline ErrorContext cameraFileContext(const std::string& file, const std::string& camera, const std::string& field) {
+  ErrorContext c;
+  c.file = file;
+  c.camera = camera;
+  c.field = field;
+  return c;
+}
 inline ErrorContext fieldContext(const std::string& field) {
   ErrorContext c;
   c.field = field;

@@ -34,7 +34,7 @@ struct ExrImage {
   bool half = false;
   // The standard "timeCode" attribute (SMPTE 12M, as cameras and conform tools write it), as
   // "HH:MM:SS:FF" ("HH:MM:SS;FF" drop frame); "" = none.
-  std::string timecode;
+  std::string timecode = {};
 };
 void writeExr(const std::filesystem::path& path, const ExrImage& exr);
 ExrImage readExr(const std::filesystem::path& path);

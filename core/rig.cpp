@@ -15,14 +15,6 @@ namespace {
 constexpr const char* kModel = "brown-conrady-opencv";
 constexpr const char* kPixelOrigin = "pixel (0,0) is the centre of the top-left pixel";
 
-ErrorContext context(const std::string& file, const std::string& camera, const std::string& field) {
-  ErrorContext c;
-  c.file = file;
-  c.camera = camera;
-  c.field = field;
-  return c;
-}
-
 const char* typeName(const nlohmann::json& j) { return j.type_name(); }
 
 // Field readers: the message says what was expected and what was found.
@@ -30,7 +22,7 @@ const nlohmann::json& require(const nlohmann::json& j, const std::string& key,
                               const std::string& prefix, const std::string& file,
                               const std::string& camera, const std::string& expected) {
   if (!j.contains(key))
-    throw Error("missing field, expected " + expected, context(file, camera, prefix + key));
+    throw Error("missing field, expected " + expected, cameraFileContext(file, camera, prefix + key));
   return j.at(key);
 }
 
@@ -38,7 +30,7 @@ double readNumber(const nlohmann::json& j, const std::string& key, const std::st
                   const std::string& file, const std::string& camera) {
   const auto& v = require(j, key, prefix, file, camera, "a number");
   if (!v.is_number())
-    throw Error(std::string("expected a number, got ") + typeName(v), context(file, camera, prefix + key));
+    throw Error(std::string("expected a number, got ") + typeName(v), cameraFileContext(file, camera, prefix + key));
   return v.get<double>();
 }
 
@@ -46,10 +38,10 @@ int readInt(const nlohmann::json& j, const std::string& key, const std::string& 
             const std::string& file, const std::string& camera) {
   const auto& v = require(j, key, prefix, file, camera, "an integer");
   if (!v.is_number_integer())
-    throw Error(std::string("expected an integer, got ") + typeName(v), context(file, camera, prefix + key));
+    throw Error(std::string("expected an integer, got ") + typeName(v), cameraFileContext(file, camera, prefix + key));
   const auto x = v.get<long long>();
   if (x < std::numeric_limits<int>::min() || x > std::numeric_limits<int>::max())
-    throw Error("integer out of range", context(file, camera, prefix + key));
+    throw Error("integer out of range", cameraFileContext(file, camera, prefix + key));
   return static_cast<int>(x);
 }
 
@@ -57,13 +49,13 @@ std::string readString(const nlohmann::json& j, const std::string& key, const st
                        const std::string& file, const std::string& camera) {
   const auto& v = require(j, key, prefix, file, camera, "a string");
   if (!v.is_string())
-    throw Error(std::string("expected a string, got ") + typeName(v), context(file, camera, prefix + key));
+    throw Error(std::string("expected a string, got ") + typeName(v), cameraFileContext(file, camera, prefix + key));
   return v.get<std::string>();
 }
 
 Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const std::string& prefix) {
   if (!j.is_object())
-    throw Error(std::string("expected a camera object, got ") + typeName(j), context(file, "", prefix.empty() ? "camera" : prefix.substr(0, prefix.size() - 1)));
+    throw Error(std::string("expected a camera object, got ") + typeName(j), cameraFileContext(file, "", prefix.empty() ? "camera" : prefix.substr(0, prefix.size() - 1)));
   Camera c;
   c.name = readString(j, "name", prefix, file, "");
   const std::string& cam = c.name;
@@ -78,20 +70,20 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
     const std::string model = readString(j, "model", prefix, file, cam);
     if (model != kModel)
       throw Error("unsupported camera model '" + model + "', expected '" + kModel + "'",
-                  context(file, cam, prefix + "model"));
+                  cameraFileContext(file, cam, prefix + "model"));
   }
   if (j.contains("distortion")) {
     const auto& d = j.at("distortion");
     const std::string dp = prefix + "distortion.";
     if (!d.is_object())
       throw Error(std::string("expected an object {\"k1\",\"k2\",\"p1\",\"p2\",\"k3\"}, got ") + typeName(d),
-                  context(file, cam, prefix + "distortion"));
+                  cameraFileContext(file, cam, prefix + "distortion"));
     for (auto it = d.begin(); it != d.end(); ++it) {
       static const std::set<std::string> known = {"k1", "k2", "p1", "p2", "k3"};
       if (!known.count(it.key()))
         throw Error("unsupported distortion term (model " + std::string(kModel) +
                         " has k1 k2 p1 p2 k3)",
-                    context(file, cam, dp + it.key()));
+                    cameraFileContext(file, cam, dp + it.key()));
     }
     // Absent terms are zero (a lens calibrated with fewer terms).
     auto term = [&](const char* k) { return d.contains(k) ? readNumber(d, k, dp, file, cam) : 0.0; };
@@ -104,7 +96,7 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
   try {
     c.validate();
   } catch (const Error& e) {
-    throw Error(e.message(), context(file, cam, prefix + e.context().field));
+    throw Error(e.message(), cameraFileContext(file, cam, prefix + e.context().field));
   }
   return c;
 }
@@ -121,7 +113,7 @@ const RigCamera& Rig::at(const std::string& name) const {
   if (const RigCamera* c = find(name)) return *c;
   std::string known;
   for (const auto& c : cameras) known += (known.empty() ? "" : ", ") + c.camera.name;
-  throw Error("no such camera in the rig (cameras: " + known + ")", context("", name, ""));
+  throw Error("no such camera in the rig (cameras: " + known + ")", cameraFileContext("", name, ""));
 }
 
 RigCamera& Rig::at(const std::string& name) {
@@ -135,24 +127,24 @@ std::vector<std::string> Rig::names() const {
 }
 
 void Rig::validate() const {
-  if (units != "m") throw Error("units must be \"m\" (got \"" + units + "\")", context("", "", "units"));
+  if (units != "m") throw Error("units must be \"m\" (got \"" + units + "\")", cameraFileContext("", "", "units"));
   std::set<std::string> seen;
   for (size_t i = 0; i < cameras.size(); ++i) {
     const RigCamera& rc = cameras[i];
     const std::string prefix = "cameras[" + std::to_string(i) + "].";
-    if (rc.camera.name.empty()) throw Error("camera name must not be empty", context("", "", prefix + "name"));
+    if (rc.camera.name.empty()) throw Error("camera name must not be empty", cameraFileContext("", "", prefix + "name"));
     if (!seen.insert(rc.camera.name).second)
-      throw Error("duplicate camera name", context("", rc.camera.name, prefix + "name"));
+      throw Error("duplicate camera name", cameraFileContext("", rc.camera.name, prefix + "name"));
     rc.camera.validate();
     if (rc.role != "witness" && rc.role != "main")
       throw Error("role must be \"witness\" or \"main\" (got \"" + rc.role + "\")",
-                  context("", rc.camera.name, prefix + "role"));
+                  cameraFileContext("", rc.camera.name, prefix + "role"));
     const Eigen::Matrix3d R = rc.T_world_cam.linear();
     if (!R.allFinite() || !rc.T_world_cam.translation().allFinite() ||
         (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
         R.determinant() <= 0.0)
       throw Error("T_world_cam must be a finite rigid transform with a proper rotation",
-                  context("", rc.camera.name, prefix + "T_world_cam"));
+                  cameraFileContext("", rc.camera.name, prefix + "T_world_cam"));
   }
 }
 
@@ -194,40 +186,40 @@ Rig rigFromJson(const nlohmann::json& j, const std::string& file) {
   if (!j.is_object())
     throw Error(std::string("expected a rig object {\"units\", \"world_frame\", \"cameras\": [...]}, got ") +
                     typeName(j),
-                context(file, "", ""));
+                cameraFileContext(file, "", ""));
   Rig rig;
   if (j.contains("units")) rig.units = readString(j, "units", "", file, "");
   if (rig.units != "m")
-    throw Error("units must be \"m\" (previz works in metres), got \"" + rig.units + "\"", context(file, "", "units"));
+    throw Error("units must be \"m\" (previz works in metres), got \"" + rig.units + "\"", cameraFileContext(file, "", "units"));
   if (j.contains("world_frame")) rig.world_frame = readString(j, "world_frame", "", file, "");
   if (j.contains("pixel_origin")) {
     // A file that claims another pixel convention would be misread by half a pixel: refuse.
     const std::string origin = readString(j, "pixel_origin", "", file, "");
     if (origin != kPixelOrigin)
       throw Error("unsupported pixel convention \"" + origin + "\", expected \"" + kPixelOrigin + "\"",
-                  context(file, "", "pixel_origin"));
+                  cameraFileContext(file, "", "pixel_origin"));
   }
   const auto& cams = require(j, "cameras", "", file, "", "an array of cameras");
   if (!cams.is_array())
-    throw Error(std::string("expected an array of cameras, got ") + typeName(cams), context(file, "", "cameras"));
+    throw Error(std::string("expected an array of cameras, got ") + typeName(cams), cameraFileContext(file, "", "cameras"));
   std::set<std::string> seen;
   for (size_t i = 0; i < cams.size(); ++i) {
     const std::string prefix = "cameras[" + std::to_string(i) + "].";
     RigCamera rc;
     rc.camera = cameraFromJsonAt(cams[i], file, prefix);
     const std::string& name = rc.camera.name;
-    if (name.empty()) throw Error("camera name must not be empty", context(file, "", prefix + "name"));
+    if (name.empty()) throw Error("camera name must not be empty", cameraFileContext(file, "", prefix + "name"));
     if (!seen.insert(name).second)
-      throw Error("duplicate camera name (names must be unique in a rig)", context(file, name, prefix + "name"));
+      throw Error("duplicate camera name (names must be unique in a rig)", cameraFileContext(file, name, prefix + "name"));
     if (cams[i].contains("role")) rc.role = readString(cams[i], "role", prefix, file, name);
     if (rc.role != "witness" && rc.role != "main")
-      throw Error("role must be \"witness\" or \"main\" (got \"" + rc.role + "\")", context(file, name, prefix + "role"));
+      throw Error("role must be \"witness\" or \"main\" (got \"" + rc.role + "\")", cameraFileContext(file, name, prefix + "role"));
     const auto& pose = require(cams[i], "T_world_cam", prefix, file, name,
                                "a pose {\"R\": [[3],[3],[3]], \"t\": [3]}");
     try {
       rc.T_world_cam = poseFromJson(pose, prefix + "T_world_cam");
     } catch (const Error& e) {
-      throw Error(e.message(), context(file, name, e.context().field));
+      throw Error(e.message(), cameraFileContext(file, name, e.context().field));
     }
     rig.cameras.push_back(std::move(rc));
   }

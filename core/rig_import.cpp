@@ -21,14 +21,6 @@ namespace previz {
 
 namespace {
 
-ErrorContext context(const fs::path& file, const std::string& camera, const std::string& field) {
-  ErrorContext c;
-  c.file = file.string();
-  c.camera = camera;
-  c.field = field;
-  return c;
-}
-
 std::string sci(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.2g", v);
@@ -62,7 +54,7 @@ std::optional<int> toInt(const std::string& s) {
 double requireNumber(const std::string& s, const fs::path& file, int line, const std::string& camera,
                      const std::string& field) {
   if (const auto v = toNumber(s)) return *v;
-  throw Error(lineTag(line) + "expected a finite number, got '" + s + "'", context(file, camera, field));
+  throw Error(lineTag(line) + "expected a finite number, got '" + s + "'", cameraFileContext(file, camera, field));
 }
 
 Pose poseFromRt(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
@@ -132,7 +124,7 @@ void finishImport(RigImport& out, const ImportOptions& opt, const std::string& w
   if (!opt.names.empty() && opt.names.size() != rig.cameras.size())
     throw Error(std::to_string(opt.names.size()) + " names given for " + std::to_string(rig.cameras.size()) +
                     " cameras (one name per camera, in the file's order)",
-                context(file, "", "names"));
+                cameraFileContext(file, "", "names"));
   if (!opt.names.empty()) out.report.assumptions.push_back("names: as given, in the order the cameras were read");
 
   const double s = opt.metresPerUnit();
@@ -164,7 +156,7 @@ void finishImport(RigImport& out, const ImportOptions& opt, const std::string& w
   try {
     rig.validate();
   } catch (const Error& e) {
-    throw Error(e.message(), context(file, e.context().camera, e.context().field));
+    throw Error(e.message(), cameraFileContext(file, e.context().camera, e.context().field));
   }
   for (std::string& w : rigPoseWarnings(rig)) out.report.warnings.push_back(std::move(w));
 }
@@ -180,7 +172,7 @@ Eigen::Vector3d readVector3(const cv::FileNode& n, const fs::path& file, const s
   const Eigen::MatrixXd M = readOpenCvMatrix(n, file, camera, field);
   if (M.size() != 3 || (M.rows() != 1 && M.cols() != 1))
     throw Error("expected " + what + " (3x1), got " + std::to_string(M.rows()) + "x" + std::to_string(M.cols()),
-                context(file, camera, field));
+                cameraFileContext(file, camera, field));
   return Eigen::Map<const Eigen::Vector3d>(M.data());
 }
 
@@ -189,7 +181,7 @@ Pose readPose(const cv::FileStorage& store, const char* r_key, const char* t_key
               const std::string& camera, ImportReport& report) {
   if (store[r_key].empty() || store[t_key].empty())
     throw Error(std::string("a pose needs both ") + r_key + " and " + t_key,
-                context(file, camera, store[r_key].empty() ? r_key : t_key));
+                cameraFileContext(file, camera, store[r_key].empty() ? r_key : t_key));
   const Eigen::MatrixXd M = readOpenCvMatrix(store[r_key], file, camera, r_key);
   Eigen::Matrix3d R;
   if (M.rows() == 3 && M.cols() == 3) {
@@ -199,7 +191,7 @@ Pose readPose(const cv::FileStorage& store, const char* r_key, const char* t_key
   } else {
     throw Error("expected a rotation vector (3x1) or matrix (3x3), got " + std::to_string(M.rows()) + "x" +
                     std::to_string(M.cols()),
-                context(file, camera, r_key));
+                cameraFileContext(file, camera, r_key));
   }
   return poseFromRt(R, readVector3(store[t_key], file, camera, t_key, "a translation"));
 }
@@ -250,7 +242,7 @@ Camera readCamera(const cv::FileStorage& store, const fs::path& file, const std:
       "extrinsic_parameters holds per-view board poses (one rvec|tvec row per calibration image, as "
       "OpenCV's calibration sample writes them), not this camera's pose: give the camera's pose as "
       "rvec/tvec, or import it without extrinsic_parameters",
-      context(file, camera, "extrinsic_parameters"));
+      cameraFileContext(file, camera, "extrinsic_parameters"));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -279,7 +271,7 @@ class YamlSubsetParser {
   YamlSubsetParser(const std::string& text, const fs::path& file) : file_(file) { split(text); }
 
   YamlNode parse() {
-    if (lines_.empty()) throw Error("empty file", context(file_, "", ""));
+    if (lines_.empty()) throw Error("empty file", cameraFileContext(file_, "", ""));
     YamlNode root = block(lines_[0].indent);
     if (pos_ < lines_.size()) fail(lines_[pos_].number, "unexpected indentation");
     return root;
@@ -293,7 +285,7 @@ class YamlSubsetParser {
   };
 
   [[noreturn]] void fail(int line, const std::string& what) const {
-    throw Error(lineTag(line) + what + " (Kalibr camchain YAML subset)", context(file_, "", ""));
+    throw Error(lineTag(line) + what + " (Kalibr camchain YAML subset)", cameraFileContext(file_, "", ""));
   }
 
   // Logical lines: comments and blank lines dropped, flow lists joined across lines.
@@ -482,7 +474,7 @@ struct KalibrCamera {
   std::string key;  // cam0, cam1, ...
 
   Error error(const std::string& field, const std::string& what, int line = 0) const {
-    return Error((line ? lineTag(line) : "") + what, context(file, key, key + "." + field));
+    return Error((line ? lineTag(line) : "") + what, cameraFileContext(file, key, key + "." + field));
   }
   const YamlNode& get(const std::string& field) const {
     const YamlNode* n = node.find(field);
@@ -580,15 +572,15 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
                                          : "unsupported camera model '" + model +
                                                "' (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
                                                "FULL_OPENCV with k4 = k5 = k6 = 0)"),
-                context(file, cam, "MODEL"));
+                cameraFileContext(file, cam, "MODEL"));
   }
   if (tok.size() != 4 + it->second)
     throw Error(lineTag(line) + model + " has " + std::to_string(it->second) + " parameters, got " +
                     std::to_string(static_cast<long>(tok.size()) - 4),
-                context(file, cam, "PARAMS"));
+                cameraFileContext(file, cam, "PARAMS"));
   Camera c;
   const auto w = toInt(tok[2]), h = toInt(tok[3]);
-  if (!w || !h) throw Error(lineTag(line) + "expected integer WIDTH HEIGHT", context(file, cam, "WIDTH"));
+  if (!w || !h) throw Error(lineTag(line) + "expected integer WIDTH HEIGHT", cameraFileContext(file, cam, "WIDTH"));
   c.width = *w;
   c.height = *h;
   std::vector<double> p;
@@ -605,7 +597,7 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
   if (model == "FULL_OPENCV") {
     c.dist.k3 = p[8];
     if (p[9] != 0 || p[10] != 0 || p[11] != 0)
-      throw Error(lineTag(line) + "k4 k5 k6 (the rational model's denominator) must be zero", context(file, cam, "PARAMS"));
+      throw Error(lineTag(line) + "k4 k5 k6 (the rational model's denominator) must be zero", cameraFileContext(file, cam, "PARAMS"));
   }
   return c;
 }
@@ -614,12 +606,12 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
 // Checks an export makes: what the format cannot carry is an Error, never dropped.
 
 void requireNoSkew(const Camera& c, const fs::path& file, const char* format) {
-  if (c.skew != 0.0) throw Error(std::string(format) + " cannot hold a skew (got " + exact(c.skew) + ")", context(file, c.name, "skew"));
+  if (c.skew != 0.0) throw Error(std::string(format) + " cannot hold a skew (got " + exact(c.skew) + ")", cameraFileContext(file, c.name, "skew"));
 }
 
 void requireSafeName(const Camera& c, const fs::path& file, const char* format) {
   if (c.name.empty() || c.name.find_first_of(" \t\r\n#/\\") != std::string::npos)
-    throw Error(std::string(format) + " needs camera names without spaces, '#', '/' or '\\'", context(file, c.name, "name"));
+    throw Error(std::string(format) + " needs camera names without spaces, '#', '/' or '\\'", cameraFileContext(file, c.name, "name"));
 }
 
 }  // namespace
@@ -664,13 +656,13 @@ Eigen::Matrix3d nearestRotation(const Eigen::Matrix3d& M) {
 
 Eigen::Matrix3d checkedRotation(const Eigen::Matrix3d& R, const fs::path& file, const std::string& camera,
                                 const std::string& field, ImportReport& report) {
-  if (!R.allFinite()) throw Error("rotation has non-finite entries", context(file, camera, field));
+  if (!R.allFinite()) throw Error("rotation has non-finite entries", cameraFileContext(file, camera, field));
   const double deviation = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   const double det = R.determinant();
   if (det <= 0.0 || deviation > kRotationRefuseAbove)
     throw Error("not a rotation: max |R^T R - I| = " + sci(deviation) + ", det = " + sci(det) +
                     " (a rotation orthonormal to " + sci(kRotationRefuseAbove) + " with det > 0 is expected)",
-                context(file, camera, field));
+                cameraFileContext(file, camera, field));
   if (deviation > kRotationWarnAbove)
     report.warnings.push_back("camera '" + camera + "': " + field + " is orthonormal only to " + sci(deviation) +
                               " (max |R^T R - I|); replaced by the nearest rotation");
@@ -728,7 +720,7 @@ RigImport importOpenCv(const std::vector<fs::path>& files, const ImportOptions& 
         if (file_names[i] == file_names[j])
           throw Error("files '" + files[i].string() + "' and '" + files[j].string() + "' both give the camera name '" +
                           file_names[i] + "': name the cameras (--name)",
-                      context(files[j], file_names[j], "names"));
+                      cameraFileContext(files[j], file_names[j], "names"));
   Namer namer(opt.names);
   int world_poses = 0, stereo_frames = 0;
 
@@ -738,7 +730,7 @@ RigImport importOpenCv(const std::vector<fs::path>& files, const ImportOptions& 
     try {
       if (has(store, "camera_matrix") && has(store, "M1"))
         throw Error("holds both camera_matrix (one camera) and M1 (a stereo pair): which is it?",
-                    context(file, "", "camera_matrix"));
+                    cameraFileContext(file, "", "camera_matrix"));
       if (has(store, "camera_matrix")) {
         RigCamera rc;
         rc.camera = readCamera(store, file, namer.next(file_names[i]), "camera_matrix", "distortion_coefficients", opt,
@@ -750,13 +742,13 @@ RigImport importOpenCv(const std::vector<fs::path>& files, const ImportOptions& 
         const bool world_rt = has(store, "R") && has(store, "t") && !has(store, "T");
         const bool rvec = !world_rt && (has(store, "rvec") || has(store, "tvec"));
         const bool rt = !world_rt && (has(store, "R") || has(store, "T"));
-        if (rvec && rt) throw Error("holds both rvec/tvec and R/T: which is the pose?", context(file, name, "rvec"));
+        if (rvec && rt) throw Error("holds both rvec/tvec and R/T: which is the pose?", cameraFileContext(file, name, "rvec"));
         if (world_rt) {
           const Pose T_cam_world = readPose(store, "R", "t", file, name, out.report);
           if (has(store, "rvec")) {
             const Pose by_rvec = readPose(store, "rvec", has(store, "tvec") ? "tvec" : "t", file, name, out.report);
             if ((by_rvec.matrix() - T_cam_world.matrix()).cwiseAbs().maxCoeff() > 1e-6)
-              throw Error("R, t and rvec, tvec give two different poses", context(file, name, "R"));
+              throw Error("R, t and rvec, tvec give two different poses", cameraFileContext(file, name, "R"));
           }
           rc.T_world_cam = T_cam_world.inverse();
           ++world_poses;
@@ -808,13 +800,13 @@ RigImport importOpenCv(const std::vector<fs::path>& files, const ImportOptions& 
         throw Error(
             "holds R/T (stereoCalibrate's extrinsics) but no camera matrices: give it right after the stereo "
             "intrinsics file (M1 D1 M2 D2) it belongs to",
-            context(file, "", "R"));
+            cameraFileContext(file, "", "R"));
       } else {
         throw Error("missing field, expected camera_matrix (one camera) or M1/M2 (a stereo pair)",
-                    context(file, file_names[i], "camera_matrix"));
+                    cameraFileContext(file, file_names[i], "camera_matrix"));
       }
     } catch (const cv::Exception& e) {
-      throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), context(file, "", ""));
+      throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), cameraFileContext(file, "", ""));
     }
   }
   const int frames = stereo_frames + (world_poses > 0 ? 1 : 0);
@@ -846,14 +838,14 @@ RigImport importKalibr(const fs::path& camchain, const ImportOptions& opt) {
   out.report.files.push_back(camchain.string());
   const YamlNode root = YamlSubsetParser(readTextFile(camchain), camchain).parse();
   if (root.kind != YamlNode::Kind::kMap || root.entries.empty())
-    throw Error("expected cam0:, cam1:, ... at the top", context(camchain, "", ""));
+    throw Error("expected cam0:, cam1:, ... at the top", cameraFileContext(camchain, "", ""));
   // PyYAML sorts the keys as text (cam0, cam1, cam10, cam2, ...): the chain goes by number.
   std::vector<const YamlNode*> chain(root.entries.size(), nullptr);
   for (const auto& [key, node] : root.entries) {
     const auto n = key.rfind("cam", 0) == 0 ? toInt(key.substr(3)) : std::nullopt;
     if (!n || *n < 0 || static_cast<size_t>(*n) >= chain.size() || key != "cam" + std::to_string(*n))
       throw Error("expected cameras cam0 .. cam" + std::to_string(chain.size() - 1) + ", got '" + key + "'",
-                  context(camchain, key, key));
+                  cameraFileContext(camchain, key, key));
     chain[static_cast<size_t>(*n)] = &node;
   }
 
@@ -919,7 +911,7 @@ RigImport importKalibr(const fs::path& camchain, const ImportOptions& opt) {
 
 void exportKalibr(const Rig& rig, const fs::path& camchain) {
   rig.validate();
-  if (rig.cameras.empty()) throw Error("no cameras to write", context(camchain, "", "cameras"));
+  if (rig.cameras.empty()) throw Error("no cameras to write", cameraFileContext(camchain, "", "cameras"));
   std::ostringstream out;
   out << "# Kalibr camchain written by previz: pinhole-radtan, T_cn_cnm1 maps camera n-1 points into camera n,\n"
          "# metres. cam0.T_world_cam (previz) places the chain in previz's world (z up, floor z = 0).\n";
@@ -928,7 +920,7 @@ void exportKalibr(const Rig& rig, const fs::path& camchain) {
     const Camera& c = rc.camera;
     requireNoSkew(c, camchain, "Kalibr's pinhole model");
     if (c.dist.k3 != 0.0)
-      throw Error("Kalibr's radtan model has no k3 (got " + exact(c.dist.k3) + ")", context(camchain, c.name, "distortion.k3"));
+      throw Error("Kalibr's radtan model has no k3 (got " + exact(c.dist.k3) + ")", cameraFileContext(camchain, c.name, "distortion.k3"));
     out << "cam" << n << ":\n";
     if (n == 0) writeYamlTransform(out, "T_world_cam", rc.T_world_cam);
     else writeYamlTransform(out, "T_cn_cnm1", rc.T_world_cam.inverse() * rig.cameras[n - 1].T_world_cam);
@@ -963,16 +955,16 @@ RigImport importColmap(const fs::path& dir, const ImportOptions& opt) {
       throw Error(fs::exists(bin, ec) ? "missing; the model is binary: convert it with `colmap model_converter "
                                         "--output_type TXT`"
                                       : "missing (a COLMAP text model: cameras.txt + images.txt)",
-                  context(f, "", ""));
+                  cameraFileContext(f, "", ""));
     }
     out.report.files.push_back(f.string());
   }
 
   std::map<std::string, Camera> cameras;  // by CAMERA_ID
   for (const auto& [line, tok] : readRows(cameras_txt)) {
-    if (tok.size() < 4) throw Error(lineTag(line) + "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]", context(cameras_txt, "", "row"));
+    if (tok.size() < 4) throw Error(lineTag(line) + "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]", cameraFileContext(cameras_txt, "", "row"));
     if (!cameras.emplace(tok[0], colmapCamera(tok, cameras_txt, line)).second)
-      throw Error(lineTag(line) + "duplicate CAMERA_ID " + tok[0], context(cameras_txt, "", "CAMERA_ID"));
+      throw Error(lineTag(line) + "duplicate CAMERA_ID " + tok[0], cameraFileContext(cameras_txt, "", "CAMERA_ID"));
   }
 
   // images.txt: an image line, then its 2-D points line (possibly empty), as COLMAP reads it.
@@ -996,7 +988,7 @@ RigImport importColmap(const fs::path& dir, const ImportOptions& opt) {
       for (std::string s; ls >> s;) tok.push_back(s);
       if (tok.size() < 10)
         throw Error(lineTag(number) + "expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME",
-                    context(images_txt, "", "row"));
+                    cameraFileContext(images_txt, "", "row"));
       Image im;
       im.line = number;
       im.name = tok[9];
@@ -1020,7 +1012,7 @@ RigImport importColmap(const fs::path& dir, const ImportOptions& opt) {
     const Image& im = images[i];
     const auto cam = cameras.find(im.camera_id);
     if (cam == cameras.end())
-      throw Error(lineTag(im.line) + "CAMERA_ID " + im.camera_id + " is not in cameras.txt", context(images_txt, im.name, "CAMERA_ID"));
+      throw Error(lineTag(im.line) + "CAMERA_ID " + im.camera_id + " is not in cameras.txt", cameraFileContext(images_txt, im.name, "CAMERA_ID"));
     RigCamera rc;
     rc.camera = cam->second;
     rc.camera.name = namer.next(names[i]);
@@ -1030,7 +1022,7 @@ RigImport importColmap(const fs::path& dir, const ImportOptions& opt) {
     if (deviation > kRotationRefuseAbove)
       throw Error(lineTag(im.line) + "quaternion norm " + exact(im.q.norm()) + " is not 1 (refused above " +
                       sci(kRotationRefuseAbove) + ")",
-                  context(images_txt, name, "QW QX QY QZ"));
+                  cameraFileContext(images_txt, name, "QW QX QY QZ"));
     if (deviation > kRotationWarnAbove)
       out.report.warnings.push_back("camera '" + name + "': quaternion norm differs from 1 by " + sci(deviation) +
                                     "; normalised");
@@ -1103,14 +1095,14 @@ void skipCountLine(std::vector<std::pair<int, std::vector<std::string>>>& rows, 
   const std::string& s = rows.front().second[0];
   if (s.find_first_not_of("0123456789") != std::string::npos)
     throw Error(lineTag(rows.front().first) + "a one-token line must be the camera count, got '" + s + "'",
-                context(path, "", "count"));
+                cameraFileContext(path, "", "count"));
   const long count = std::stol(s);
   const int line = rows.front().first;
   rows.erase(rows.begin());
   if (count != static_cast<long>(rows.size()))
     throw Error(lineTag(line) + "the file announces " + std::to_string(count) + " cameras but holds " +
                     std::to_string(rows.size()),
-                context(path, "", "count"));
+                cameraFileContext(path, "", "count"));
 }
 
 struct CameraRow {
@@ -1124,7 +1116,7 @@ std::vector<CameraRow> readCameraRows(const fs::path& path, const ImportOptions&
                                       const char* layout, RigImport& out) {
   opt.validate();
   if (opt.width <= 0 && !opt.size_of)
-    throw Error("rows carry no image size: give one (--size WxH, or --take)", context(path, "", "width/height"));
+    throw Error("rows carry no image size: give one (--size WxH, or --take)", cameraFileContext(path, "", "width/height"));
   out.report.files.push_back(path.string());
   auto rows = readRows(path);
   skipCountLine(rows, path);
@@ -1135,7 +1127,7 @@ std::vector<CameraRow> readCameraRows(const fs::path& path, const ImportOptions&
     if (tok.size() != fields)
       throw Error(lineTag(line) + "expected " + std::to_string(fields) + " fields (" + layout + "), got " +
                       std::to_string(tok.size()),
-                  context(path, name, "row"));
+                  cameraFileContext(path, name, "row"));
     out_rows.push_back({line, name, std::move(tok)});
   }
   out.report.assumptions.push_back(
@@ -1151,14 +1143,14 @@ std::pair<int, int> rowSize(const ImportOptions& opt, const fs::path& path, cons
   const std::pair<int, int> s = givenSize(opt, row.name);
   if (s.first <= 0)
     throw Error(lineTag(row.line) + "no image size for this camera: the take has no image of it (give --size WxH)",
-                context(path, row.name, "width/height"));
+                cameraFileContext(path, row.name, "width/height"));
   return s;
 }
 
 // An Error from one row, with its line, file and camera.
 Error rowError(const Error& e, const fs::path& path, const CameraRow& row) {
   const std::string msg = e.message().rfind("line ", 0) == 0 ? e.message() : lineTag(row.line) + e.message();
-  return Error(msg, context(path, row.name, e.context().field));
+  return Error(msg, cameraFileContext(path, row.name, e.context().field));
 }
 
 // P rows written as K [R | t] by a tool whose world is left-handed (Oxford's dino.P.txt) have
@@ -1197,7 +1189,7 @@ RigImport importRows(const fs::path& path, const ImportOptions& opt, bool krt) {
         K << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
         R << v[9], v[10], v[11], v[12], v[13], v[14], v[15], v[16], v[17];
         if (K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0 || K(2, 2) != 1.0)
-          throw Error("expected K = [fx s cx; 0 fy cy; 0 0 1]", context(path, row.name, "K"));
+          throw Error("expected K = [fx s cx; 0 fy cy; 0 0 1]", cameraFileContext(path, row.name, "K"));
         rc.camera.name = row.name;
         std::tie(rc.camera.width, rc.camera.height) = rowSize(opt, path, row);
         rc.camera.fx = K(0, 0);

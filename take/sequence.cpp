@@ -7,6 +7,8 @@
 #include <map>
 #include <numeric>
 
+#include "take/detail/files.h"
+
 namespace previz::take {
 namespace fs = std::filesystem;
 
@@ -88,11 +90,7 @@ std::optional<SequencePattern> parsePattern(const std::string& text) {
 }
 
 bool isImageExtension(const fs::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  static const char* const kExtensions[] = {".png", ".jpg", ".jpeg", ".tif", ".tiff",
-                                            ".exr", ".bmp", ".ppm", ".pgm"};
-  return std::any_of(std::begin(kExtensions), std::end(kExtensions), [&](const char* e) { return ext == e; });
+  return detail::hasExtension(path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".bmp", ".ppm", ".pgm"});
 }
 
 std::vector<FoundSequence> findSequences(const fs::path& dir) {

@@ -6,6 +6,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/srgb.h"
+#include "take/detail/files.h"
 #include "take/sequence.h"
 #include "take/timecode.h"
 #include "take/video.h"
@@ -24,12 +25,6 @@ std::string extensionOf(const std::string& format) {
   if (format == "h264") return ".mp4";
   if (format == "prores") return ".mov";
   throw Error("format must be png|jpg|png16|tif16|exr|ffv1|h264|prores (got '" + format + "')", fieldContext("format"));
-}
-
-std::string replaceAll(std::string text, const std::string& from, const std::string& to) {
-  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
-    text.replace(at, from.size(), to);
-  return text;
 }
 
 // The picture before 8-bit quantisation when given, else the 8-bit codes, as sRGB-coded floats.
@@ -111,7 +106,7 @@ StreamWriter::StreamWriter(const fs::path& take_dir, const std::string& camera, 
     m.video = std::make_unique<VideoWriter>(m.video_path, size, vo);
   } else {
     const std::string text =
-        replaceAll(options.pattern.empty() ? std::string("%06d") : options.pattern, "{camera}", camera) +
+        detail::replaceAll(options.pattern.empty() ? std::string("%06d") : options.pattern, "{camera}", camera) +
         extensionOf(options.format);
     m.pattern = *parsePattern(text);
     m.dir = take_dir / "cams" / camera;

@@ -28,6 +28,7 @@ using detail::findByStem;
 using detail::kStillExtensions;
 using detail::kVideoExtensions;
 using detail::lower;
+using detail::replaceAll;
 
 bool isVideo(const fs::path& p) { return detail::hasExtension(p, kVideoExtensions); }
 
@@ -35,12 +36,6 @@ ErrorContext takeJsonContext(const fs::path& file, const std::string& field, con
   ErrorContext c = fileContext(file.string(), field);
   c.camera = camera;
   return c;
-}
-
-std::string replaceAll(std::string text, const std::string& from, const std::string& to) {
-  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
-    text.replace(at, from.size(), to);
-  return text;
 }
 
 // "cams/A/A001C003.1001.exr", relative to the take folder when inside it.
@@ -151,13 +146,6 @@ cv::Mat readImage8(const fs::path& path, std::string* format, int* bit_depth, st
     throw Error(e.message(), fileContext(path.string()));
   }
 }
-
-// ---------------------------------------------------------------------------------------------
-// Videos: one reader per camera, shared by the threads that read it.
-
-struct Take::Video {
-  std::unique_ptr<VideoReader> reader;
-};
 
 Take::~Take() = default;
 Take::Take(Take&&) noexcept = default;
@@ -490,9 +478,9 @@ void Take::probeVideo(CameraStream& s) {
     s.header_frames = probe.header_frames;
     s.start_timecode = probe.timecode;
     if (!s.start_timecode.empty()) s.timecode_from = "container";
-    auto video = std::make_unique<Video>();
-    video->reader = std::make_unique<VideoReader>(s.path, options_.video_prefetch);
-    const long long decodable = video->reader->decodableFrames();
+    // One decoder per camera, shared by the threads that read it (VideoReader is thread-safe).
+    auto video = std::make_unique<VideoReader>(s.path, options_.video_prefetch);
+    const long long decodable = video->decodableFrames();
     for (long long f = 0; f < decodable; ++f) s.source_frames.push_back(f);
     if (s.header_frames >= 0 && s.header_frames != decodable)
       s.notes.push_back("the container says " + std::to_string(s.header_frames) + " frames, " +
@@ -566,7 +554,7 @@ CameraImage Take::read(const std::string& camera, int frame) const {
   }
   try {
     if (s.kind == SourceKind::kVideo) {
-      VideoReader::Frame f = videos_.at(camera)->reader->read(out.source_frame);
+      VideoReader::Frame f = videos_.at(camera)->read(out.source_frame);
       if (!f.error.empty()) {
         out.dropped = "unreadable " + out.source + ": " + f.error;
         return out;

@@ -38,6 +38,8 @@
 
 namespace previz::take {
 
+class VideoReader;  // take/video.h
+
 enum class SourceKind { kNone, kSequence, kVideo, kStill, kLive };
 std::string toString(SourceKind kind);
 
@@ -144,7 +146,6 @@ class Take {
   nlohmann::json info() const;
 
  private:
-  struct Video;
   void findStream(CameraStream& s);
   void probeStill(CameraStream& s) const;
   void probeSequence(CameraStream& s) const;
@@ -158,7 +159,7 @@ class Take {
   std::string fps_from_ = "default";
   std::vector<std::string> names_;
   std::map<std::string, CameraStream> streams_;
-  std::map<std::string, std::unique_ptr<Video>> videos_;
+  std::map<std::string, std::unique_ptr<VideoReader>> videos_;  // video cameras' decoders
   std::string main_;
   std::vector<int> frames_;
 };

@@ -1,5 +1,6 @@
 #pragma once
-// File lookups the take model shares (take.cpp, clean_plate.cpp).
+// File lookups and name helpers the take module shares (take.cpp, clean_plate.cpp,
+// stream_writer.cpp, sequence.cpp).
 #include <algorithm>
 #include <cctype>
 #include <filesystem>
@@ -18,6 +19,13 @@ inline constexpr std::initializer_list<const char*> kStillExtensions = {".png", 
 inline std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
+}
+
+// text with every 'from' replaced by 'to' ("{camera}" in a source pattern).
+inline std::string replaceAll(std::string text, const std::string& from, const std::string& to) {
+  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
+    text.replace(at, from.size(), to);
+  return text;
 }
 
 inline bool hasExtension(const std::filesystem::path& p, std::initializer_list<const char*> extensions) {

@@ -215,7 +215,12 @@ int runInfo(const InfoArgs& a) {
     }
     for (const nlohmann::json& m : info["mismatches"]) std::cerr << "  ! " << m.get<std::string>() << "\n";
   }
-  // A camera that cannot be read at all is worth a non-zero status to a script.
+  // A take with nothing in it, or a camera that cannot be read at all, is worth a non-zero
+  // status to a script.
+  if (t.cameras().empty() || t.frames().empty()) {
+    std::cerr << "take info: " << a.take << ": " << (t.cameras().empty() ? "no camera found" : "no frame found") << "\n";
+    return 3;
+  }
   for (const nlohmann::json& c : info["cameras"])
     if (!c["usable"].get<bool>()) return 3;
   return 0;
@@ -243,7 +248,7 @@ int runConvert(const ConvertArgs& a) {
                                 {"offsets", s.offsets}, {"left_out", s.left_out}}
                      .dump()
               << "\n";
-  return 0;
+  return s.left_out.empty() ? 0 : 3;  // a partial conversion is not a quiet success
 }
 
 }  // namespace

@@ -40,7 +40,21 @@ ConvertSummary convertTake(const fs::path& in_dir, const fs::path& out, const Co
   StreamWriterOptions base = options.writer;
   base.fps = in.fps();
   base.validate();
+  // Nothing to convert is an error before anything is written, not an empty take.
+  bool any_usable = false;
+  for (const std::string& name : in.cameras()) any_usable = any_usable || in.stream(name).usable();
+  if (!any_usable) throw Error("no camera of the take has a usable stream", fileContext(in_dir.string()));
 
+  // A conversion that fails part-way leaves no half-written take: a folder it made is removed.
+  const bool made_out = !fs::exists(out, ec);
+  struct RemoveOnFailure {
+    const fs::path& dir;
+    bool armed;
+    ~RemoveOnFailure() {
+      std::error_code ignored;
+      if (armed) fs::remove_all(dir, ignored);
+    }
+  } cleanup{out, made_out};
   fs::create_directories(out);
   copyOthers(in_dir, out);
   ConvertSummary summary;
@@ -56,7 +70,11 @@ ConvertSummary convertTake(const fs::path& in_dir, const fs::path& out, const Co
     const auto late = options.late_frames.find(name);
     if (late != options.late_frames.end())
       frames.erase(frames.begin(), std::lower_bound(frames.begin(), frames.end(), late->second));
-    if (frames.empty()) continue;
+    if (frames.empty()) {
+      summary.left_out.push_back(name + ": no frame at or after take frame " + std::to_string(late->second) +
+                                 " (late_frames)");
+      continue;
+    }
     const StreamPlacement place = placeStream(base, frames.front());
     if (place.offset) summary.offsets[name] = *place.offset;
     std::unique_ptr<StreamWriter> w;
@@ -78,6 +96,7 @@ ConvertSummary convertTake(const fs::path& in_dir, const fs::path& out, const Co
     w->close();
     summary.streams[name] = w->source();
   }
+  if (summary.streams.empty()) throw Error("no camera was converted", fileContext(in_dir.string()));
   // take.json last: its presence marks a complete take. Sources and offsets are the new ones.
   nlohmann::json j = in.takeJson();
   j.erase("sources");
@@ -87,6 +106,7 @@ ConvertSummary convertTake(const fs::path& in_dir, const fs::path& out, const Co
   j["converted_from"] = {{"take", fs::absolute(in_dir).lexically_normal().string()}, {"format", base.format}};
   if (!j.contains("fps")) j["fps"] = in.fps();
   writeJsonAtomic(out / "take.json", j);
+  cleanup.armed = false;
   return summary;
 }
 

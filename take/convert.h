@@ -31,7 +31,9 @@ struct ConvertSummary {
 };
 
 // Throws Error naming the file and camera when a frame cannot be read (a conversion drops
-// nothing silently) or the output is a take already.
+// nothing silently), when no camera has a usable stream (before anything is written) or the
+// output is a take already; an output folder the conversion made is removed when it throws.
+// Cameras left out (no usable stream) are listed in the summary.
 ConvertSummary convertTake(const std::filesystem::path& in, const std::filesystem::path& out,
                            const ConvertOptions& options,
                            const std::function<void(long long done, long long total)>& progress = {});

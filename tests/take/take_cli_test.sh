@@ -207,5 +207,23 @@ expect_fail "carve: every camera unreadable fails the frames and exits non-zero"
 [ ! -e "$tmp/c_bad/depth/000000.exr" ] && ok "carve: no depth written for a failed frame" || fail "depth written for a failed frame"
 expect_fail "take info: no take folder" "take folder not found" "$bin" take info "$tmp/nope"
 expect_fail "take convert: unknown format" "format" "$bin" take convert "$take" --out "$tmp/x" --format webp
+mkdir -p "$tmp/empty_take"
+expect_fail "take info: a folder with no camera in it exits non-zero" "no camera found" "$bin" take info "$tmp/empty_take"
+expect_fail "take convert: a corrupt frame names its file and camera" "000000.png': camera '[a-z0-9]+': frame 0: cannot convert" \
+  "$bin" take convert "$tmp/unreadable" --out "$tmp/conv_bad" --format png --quiet
+[ ! -e "$tmp/conv_bad" ] && ok "take convert: a failed conversion leaves no half-written take" || fail "take convert left $tmp/conv_bad"
+mkdir -p "$tmp/nostream" && cp "$take/take.json" "$tmp/nostream/"
+for c in $(ls "$take/cams"); do mkdir -p "$tmp/nostream/cams/$c"; done
+expect_fail "take convert: no camera with a stream is an error" "no camera of the take has a usable stream" \
+  "$bin" take convert "$tmp/nostream" --out "$tmp/conv_none" --format png --quiet
+[ ! -e "$tmp/conv_none" ] && ok "take convert: nothing written when no camera has a stream" || fail "take convert wrote $tmp/conv_none"
+# One camera without frames: the others are converted, the camera is named, and the status says so.
+cp -r "$take" "$tmp/partial" && rm -rf "$tmp/partial/out"
+bad=$(ls "$tmp/partial/cams" | head -1)
+rm -f "$tmp/partial/cams/$bad"/*
+"$bin" take convert "$tmp/partial" --out "$tmp/conv_part" --format png --quiet 2> "$tmp/conv_part.err"; rc=$?
+if [ $rc -eq 3 ] && grep -q "left out $bad" "$tmp/conv_part.err" && [ -e "$tmp/conv_part/take.json" ]; then
+  ok "take convert: a camera left out is named and exits 3, the rest converted"
+else fail "take convert partial (rc $rc): $(cat "$tmp/conv_part.err")"; fi
 
 finish

@@ -222,6 +222,60 @@ void BM_KeyMain(benchmark::State& state) {
   }
 }
 
+// Each keying mode on one frame set of its own stage (green, blue, the set without a screen:
+// datasets/studio.h Backdrop), sensor noise 2 on plates and frames, every camera keyed against
+// its clean plate (the main camera's too: it stands still at this instant). One record per
+// frame set: 8 witnesses (silhouette only) + the main camera (soft alpha), as the live loop keys.
+struct BackdropFrame {
+  std::vector<cv::Mat> frames;
+  std::vector<Keyer> keyers;
+};
+BackdropFrame& backdropFrame(synth::Backdrop backdrop, int threads) {
+  static std::map<std::pair<int, int>, std::unique_ptr<BackdropFrame>> cache;
+  std::unique_ptr<BackdropFrame>& b = cache[{static_cast<int>(backdrop), threads}];
+  if (b) return *b;
+  b = std::make_unique<BackdropFrame>();
+  StudioConfig config;
+  config.backdrop = backdrop;
+  const Studio studio(config);
+  const Rig rig = studioRig(StudioRigOptions{}, config.take_duration_s, true);
+  const Scene scene = studio.sceneAt(kTime, kLayersPlate), empty = studio.sceneAt(kTime, kLayerStage);
+  RenderOptions ro;
+  ro.samples_per_pixel = 4;
+  ro.noise_sigma = 2.0;
+  ro.truth = false;
+  for (size_t i = 0; i < rig.cameras.size(); ++i) {
+    RigCamera c = rig.cameras[i];
+    if (c.role == "main") c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
+    ro.camera_index = static_cast<int>(i);
+    ro.frame = 1;
+    b->frames.push_back(renderView(c.camera, c.T_world_cam, scene, ro).bgr);
+    KeyerOptions o;
+    o.soft_alpha = c.role == "main";
+    o.remember_garbage_zone = c.role != "main";
+    o.threads = threads;
+    b->keyers.emplace_back(o);
+    ro.frame = 0;
+    b->keyers.back().setCleanPlate(renderView(c.camera, c.T_world_cam, empty, ro).bgr, c.camera.name + " plate");
+  }
+  return *b;
+}
+void BM_KeyBackdrop(benchmark::State& state) {
+  const auto backdrop = static_cast<synth::Backdrop>(state.range(0));
+  const int threads = benchThreads(state);
+  BackdropFrame& b = backdropFrame(backdrop, threads);
+  const std::string mode = carving::toString(b.keyers.front().screen().backdrop);  // as the keyer chose it
+  for (auto _ : state) {
+    const Stopwatch sw;
+    for (size_t c = 0; c < b.frames.size(); ++c) {
+      KeyResult r = b.keyers[c].key(b.frames[c], "frame");
+      benchmark::DoNotOptimize(r.silhouette.data);
+    }
+    record("1c_key_frameset_" + mode + threadKey(threads), "key_frameset_" + mode, "8x1280x720+1920x1080", sw,
+           5.0, threads, "\"noise_sigma\":2,\"clean_plate\":true,\"backdrop\":\"" + mode + "\"");
+  }
+}
+
 struct CarveCase {
   std::unique_ptr<Carver> carver;
   VisualHull hull;
@@ -445,6 +499,8 @@ void BM_DenseCarve(benchmark::State& state) {
 BENCHMARK(BM_KeyWitness)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_KeyWitnessNoisy)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_KeyMain)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)->Iterations(5);
+// Backdrop (datasets/studio.h: 0 green, 1 blue, 2 set without a screen), threads.
+BENCHMARK(BM_KeyBackdrop)->ArgsProduct({{0, 1, 2}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_Carve)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_Depth)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_RefineDepth)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);

@@ -93,6 +93,35 @@ int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_
 
 float chromaQ(float r, float g, float b) { return (g - std::max(r, b)) / std::max(g, 1e-6f); }
 
+void swapBlueGreen(const cv::Mat& in, cv::Mat& out) {
+  out.create(in.size(), CV_8UC3);
+  const int from_to[] = {0, 1, 1, 0, 2, 2};
+  cv::mixChannels(&in, 1, &out, 1, from_to, 3);
+}
+
+// Which screen a frame shows: on a 4-px grid, the pixels that are clearly green (G above R and
+// B by a quarter of G in linear light, not dark) against those clearly blue. A screen fills a
+// good part of a witness frame; the dark studio's slight blue cast is below the quarter.
+Backdrop dominantScreen(const cv::Mat& bgr8, int& support) {
+  const auto& lut = srgb8ToLinear();
+  constexpr int kStep = 4;
+  constexpr float kQ = 0.25f;
+  int green = 0, blue = 0, samples = 0;
+  for (int y = kStep / 2; y < bgr8.rows; y += kStep) {
+    const std::uint8_t* p = bgr8.ptr<std::uint8_t>(y);
+    for (int x = kStep / 2; x < bgr8.cols; x += kStep, ++samples) {
+      const float b = lut[p[3 * x]], g = lut[p[3 * x + 1]], r = lut[p[3 * x + 2]];
+      if (r + g + b < 0.03f) continue;
+      green += chromaQ(r, g, b) >= kQ;
+      blue += chromaQ(r, b, g) >= kQ;
+    }
+  }
+  support = std::max(green, blue);
+  // Fewer than 2 % of the samples: no screen in the frame (or one too small to estimate).
+  if (support < std::max(50, samples / 50)) return Backdrop::kAuto;
+  return green >= blue ? Backdrop::kGreen : Backdrop::kBlue;
+}
+
 // Key colour from the frame: the mode of a chromaticity histogram over green-dominant pixels
 // (the screen is the largest uniform area of a witness frame), then the per-channel median of
 // the samples in and around that bin. Sampled on a 4-px grid.
@@ -430,6 +459,130 @@ void findLoneUnknown(const cv::Mat& cls, int y0, int y1, std::vector<detail::Lon
   }
 }
 
+// ---- Difference keying (no screen) ----
+
+// Sensor noise of an image (grey levels): the median absolute second difference along rows of
+// each channel on a sparse grid, scaled to the sigma of Gaussian noise (a second difference of
+// white noise has sigma * sqrt(6); median |x| = 0.6745 sigma). Texture adds to it a little, which
+// only widens the tolerance.
+float estimateNoise(const cv::Mat& bgr8) {
+  std::vector<int> d;
+  d.reserve(static_cast<size_t>(bgr8.rows / 4 + 1) * (bgr8.cols / 4 + 1) * 3);
+  for (int y = 2; y < bgr8.rows; y += 4) {
+    const std::uint8_t* p = bgr8.ptr<std::uint8_t>(y);
+    for (int x = 1; x + 1 < bgr8.cols; x += 4)
+      for (int c = 0; c < 3; ++c) {
+        const int v = p[3 * x + c];
+        if (v < 4 || v > 251) continue;  // clipped: no noise to see
+        d.push_back(std::abs(p[3 * (x - 1) + c] - 2 * v + p[3 * (x + 1) + c]));
+      }
+  }
+  if (d.empty()) return 0.0f;
+  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+  return static_cast<float>(d[d.size() / 2] / (0.6745 * std::sqrt(6.0)));
+}
+
+cv::Vec3f plateMeanColour(const cv::Mat& bgr8) {
+  const auto& lut = srgb8ToLinear();
+  double sum[3] = {0, 0, 0};
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const std::uint8_t* p = bgr8.ptr<std::uint8_t>(y);
+    for (int x = 0; x < bgr8.cols; ++x)
+      for (int c = 0; c < 3; ++c) sum[c] += lut[p[3 * x + c]];
+  }
+  const double n = std::max(1.0, static_cast<double>(bgr8.total()));
+  return cv::Vec3f(static_cast<float>(sum[0] / n), static_cast<float>(sum[1] / n), static_cast<float>(sum[2] / n));
+}
+
+// One frame's constants of the difference pass.
+struct DifferenceFrame {
+  float gain = 1;                             // the frame's exposure relative to the plate
+  std::array<std::uint8_t, 256> expected{};   // plate code -> its code at the frame's exposure
+  std::array<float, 256> expected_linear{};   // the same, linear
+  int tolerance = 0;                          // levels: equal to the plate within noise
+  float sigma_frame = 0, sigma_plate = 0;     // estimated sensor noise, grey levels
+  float min_shadow = 0.4f;
+};
+
+DifferenceFrame differenceFrame(const cv::Mat& bgr8, const ScreenModel& sm, const KeyerOptions& o) {
+  const auto& lut = srgb8ToLinear();
+  // Exposure: median of frame / plate brightness on a sparse grid, over pixels bright enough for
+  // the ratio to mean something. The actor, its shadows and the noise are a minority.
+  std::vector<float> ratios;
+  ratios.reserve(static_cast<size_t>(bgr8.rows / 6 + 1) * (bgr8.cols / 6 + 1));
+  for (int y = 3; y < bgr8.rows; y += 6) {
+    const std::uint8_t* f = bgr8.ptr<std::uint8_t>(y);
+    const std::uint8_t* p = sm.plate.ptr<std::uint8_t>(y);
+    for (int x = 3; x < bgr8.cols; x += 6) {
+      const float sp = lut[p[3 * x]] + lut[p[3 * x + 1]] + lut[p[3 * x + 2]];
+      if (sp < 0.05f || std::max({p[3 * x], p[3 * x + 1], p[3 * x + 2]}) > 250) continue;
+      ratios.push_back((lut[f[3 * x]] + lut[f[3 * x + 1]] + lut[f[3 * x + 2]]) / sp);
+    }
+  }
+  DifferenceFrame d;
+  if (!ratios.empty()) {
+    std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+    d.gain = ratios[ratios.size() / 2];
+  }
+  for (int v = 0; v < 256; ++v) {
+    d.expected_linear[static_cast<size_t>(v)] = std::min(1.0f, d.gain * lut[static_cast<size_t>(v)]);
+    d.expected[static_cast<size_t>(v)] = linearToSrgb8(d.expected_linear[static_cast<size_t>(v)]);
+  }
+  // The difference of two noisy images: 4 sigma of it, plus a level of quantisation, at least
+  // plate_tolerance / 3 (a noise-free render still has anti-aliasing and encoder rounding).
+  const float sigma_frame = estimateNoise(bgr8);
+  const float sigma = std::sqrt(sigma_frame * sigma_frame + sm.plate_noise * sm.plate_noise);
+  d.tolerance = std::max(o.plate_tolerance / 3, static_cast<int>(std::ceil(3.0f * sigma + 1.0f)));
+  d.sigma_frame = sigma_frame;
+  d.sigma_plate = sm.plate_noise;
+  d.min_shadow = static_cast<float>(o.min_shadow);
+  return d;
+}
+
+// Pass 1 of difference keying over rows [y0, y1): kScreen (background: the plate, or its
+// shadow), kFg, kUnknown. Returns the pixels taken for shadows.
+int differenceRows(const cv::Mat& bgr8, const cv::Mat& plate, const DifferenceFrame& d, int y0, int y1,
+                   cv::Mat& cls) {
+  const auto& lut = srgb8ToLinear();
+  const int W = bgr8.cols, tol = d.tolerance;
+  int shadows = 0;
+  for (int y = y0; y < y1; ++y) {
+    const std::uint8_t* f = bgr8.ptr<std::uint8_t>(y);
+    const std::uint8_t* p = plate.ptr<std::uint8_t>(y);
+    std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+    for (int x = 0; x < W; ++x) {
+      const std::uint8_t* fx = f + 3 * x;
+      const std::uint8_t* px = p + 3 * x;
+      int diff = 0;
+      for (int k = 0; k < 3; ++k) diff = std::max(diff, std::abs(fx[k] - d.expected[px[k]]));
+      if (diff <= tol) {
+        c[x] = kScreen;
+        continue;
+      }
+      // A shadow: the plate's colour darkened by one factor s (the least-squares one, in linear
+      // light), within 3 sigma of the noise on every channel (the plate's noise darkened too):
+      // tighter than the plain difference, as a dark costume of the floor's hue is also a
+      // darkened plate, only darker than the lights' deepest shadow or off by its hue.
+      const float e0 = d.expected_linear[px[0]], e1 = d.expected_linear[px[1]], e2 = d.expected_linear[px[2]];
+      const float ee = e0 * e0 + e1 * e1 + e2 * e2;
+      const float s = ee > 1e-8f ? (lut[fx[0]] * e0 + lut[fx[1]] * e1 + lut[fx[2]] * e2) / ee : 0.0f;
+      if (s >= d.min_shadow && s <= 1.0f) {
+        const int ds = std::max({std::abs(fx[0] - linearToSrgb8(s * e0)), std::abs(fx[1] - linearToSrgb8(s * e1)),
+                                 std::abs(fx[2] - linearToSrgb8(s * e2))});
+        const float sigma = std::sqrt(d.sigma_frame * d.sigma_frame + s * s * d.sigma_plate * d.sigma_plate);
+        if (ds <= 3.0f * sigma + 1.0f) {
+          c[x] = kScreen;
+          ++shadows;
+          continue;
+        }
+        diff = std::min(diff, ds);
+      }
+      c[x] = diff >= 2 * tol ? kFg : kUnknown;
+    }
+  }
+  return shadows;
+}
+
 // F's candidates: aligned foreground neighbours at least this fraction of the purest one's
 // distance from B. Measured on 24 studio keys against the exact 4-sample coverage, sensor noise
 // 2, no plate, against the purest alone: alpha on mixed pixels RMS error 0.093 -> 0.089, bias
@@ -744,18 +897,70 @@ void KeyerOptions::validate() const {
   if (plate_tolerance < 1 || plate_tolerance > 80) {
     bad("plate_tolerance", "must be in [1, 80] (got " + str(plate_tolerance) + ")");
   }
+  if (!(min_shadow > 0 && min_shadow < 1)) bad("min_shadow", "must be in (0, 1) (got " + str(min_shadow) + ")");
   if (threads < 0) bad("threads", "must be >= 0 (got " + str(threads) + ")");
 }
 
-Keyer::Keyer(const KeyerOptions& options) : options_(options) { options_.validate(); }
+const char* toString(Backdrop backdrop) {
+  switch (backdrop) {
+    case Backdrop::kAuto: return "auto";
+    case Backdrop::kGreen: return "green";
+    case Backdrop::kBlue: return "blue";
+    case Backdrop::kNone: return "none";
+  }
+  return "?";
+}
 
-void Keyer::setCleanPlate(const cv::Mat& bgr8, const std::string& source) {
-  checkImage(bgr8, source);
+Backdrop backdropFromString(const std::string& name) {
+  for (Backdrop b : {Backdrop::kAuto, Backdrop::kGreen, Backdrop::kBlue, Backdrop::kNone})
+    if (name == toString(b)) return b;
+  ErrorContext context;
+  context.field = "screen";
+  throw Error("keyer: unknown backdrop '" + name + "' (auto, green, blue or none)", context);
+}
+
+Keyer::Keyer(const KeyerOptions& options) : options_(options), backdrop_(options.backdrop) {
+  options_.validate();
+}
+
+const cv::Mat& Keyer::working(const cv::Mat& bgr8) {
+  if (backdrop_ != Backdrop::kBlue) return bgr8;
+  swapBlueGreen(bgr8, swapped_);
+  return swapped_;
+}
+
+void Keyer::chooseBackdrop(const cv::Mat& bgr8, const std::string& source, bool is_plate) {
+  if (backdrop_ != Backdrop::kAuto) return;
+  int support = 0;
+  backdrop_ = dominantScreen(bgr8, support);
+  if (backdrop_ != Backdrop::kAuto) return;
+  if (is_plate) {
+    backdrop_ = Backdrop::kNone;  // a set without a screen: keyed by difference
+    return;
+  }
+  fail("no green or blue screen found (" + str(support) +
+           " screen-coloured samples) and no clean plate to key by difference",
+       source);
+}
+
+void Keyer::setCleanPlate(const cv::Mat& plate, const std::string& source) {
+  checkImage(plate, source);
+  chooseBackdrop(plate, source, true);
+  const cv::Mat& bgr8 = working(plate);
   const auto& lut = srgb8ToLinear();
   ScreenModel sm;
+  sm.backdrop = backdrop_;
   sm.from_clean_plate = true;
   sm.plate = bgr8.clone();
-  if (!estimateKeyColour(bgr8, sm.key_color)) fail("no green screen found in the clean plate", source);
+  if (backdrop_ == Backdrop::kNone) {
+    sm.plate_noise = estimateNoise(sm.plate);
+    sm.key_color = plateMeanColour(sm.plate);  // despill's fallback background, nothing more
+    screen_ = std::move(sm);
+    has_screen_ = true;
+    return;
+  }
+  if (!estimateKeyColour(bgr8, sm.key_color))
+    fail(std::string("no ") + toString(backdrop_) + " screen found in the clean plate", source);
   sm.key_q = chromaQ(sm.key_color[2], sm.key_color[1], sm.key_color[0]);
   if (!(sm.key_q > 0.1f)) fail("screen colour is too unsaturated to key (q = " + str(sm.key_q) + ")", source);
   const ClassifyTables tables = makeTables(sm);
@@ -818,16 +1023,22 @@ void Keyer::setCleanPlate(const cv::Mat& bgr8, const std::string& source) {
   has_screen_ = true;
 }
 
-KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
-  checkImage(bgr8, source);
-  if (has_screen_ && screen_.from_clean_plate && bgr8.size() != screen_.plate.size()) {
-    fail("frame is " + str(bgr8.cols) + "x" + str(bgr8.rows) + " but the clean plate is " +
+KeyResult Keyer::key(const cv::Mat& frame, const std::string& source) {
+  checkImage(frame, source);
+  if (has_screen_ && screen_.from_clean_plate && frame.size() != screen_.plate.size()) {
+    fail("frame is " + str(frame.cols) + "x" + str(frame.rows) + " but the clean plate is " +
              str(screen_.plate.cols) + "x" + str(screen_.plate.rows),
          source);
   }
+  if (!has_screen_) chooseBackdrop(frame, source, false);
+  if (backdrop_ == Backdrop::kNone && !has_screen_)
+    fail("no screen (backdrop none): keying by difference needs the camera's clean plate", source);
+  const cv::Mat& bgr8 = working(frame);
   if (!has_screen_) {
     ScreenModel sm;
-    if (!estimateKeyColour(bgr8, sm.key_color)) fail("no green screen found in the frame", source);
+    sm.backdrop = backdrop_;
+    if (!estimateKeyColour(bgr8, sm.key_color))
+      fail(std::string("no ") + toString(backdrop_) + " screen found in the frame", source);
     sm.key_q = chromaQ(sm.key_color[2], sm.key_color[1], sm.key_color[0]);
     if (!(sm.key_q > 0.1f)) fail("screen colour is too unsaturated to key (q = " + str(sm.key_q) + ")", source);
     screen_ = std::move(sm);
@@ -858,18 +1069,28 @@ KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
   // Pass 1: classes.
   classes_.create(H, W, CV_8UC1);
   cv::Mat& cls = classes_;
+  int shadows = 0;
+  if (screen_.backdrop == Backdrop::kNone) {
+    const DifferenceFrame diff = differenceFrame(bgr8, screen_, options_);
+    screen_.exposure_gain = diff.gain;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : shadows)
+    for (int band = 0; band < bands; ++band)
+      shadows += differenceRows(bgr8, screen_.plate, diff, band * kBandRows,
+                                std::min(H, (band + 1) * kBandRows), cls);
+  } else {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (int band = 0; band < bands; ++band) {
-    band_seeds_[band].clear();
-    classifyRows(bgr8, params, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
-                 band_seeds_[band]);
-  }
-  if (params.use_garbage_model) {
-    std::vector<cv::Point>& stack = band_seeds_[0];
-    for (int band = 1; band < bands; ++band) {
-      stack.insert(stack.end(), band_seeds_[band].begin(), band_seeds_[band].end());
+    for (int band = 0; band < bands; ++band) {
+      band_seeds_[band].clear();
+      classifyRows(bgr8, params, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
+                   band_seeds_[band]);
     }
-    floodGarbage(cls, stack);
+    if (params.use_garbage_model) {
+      std::vector<cv::Point>& stack = band_seeds_[0];
+      for (int band = 1; band < bands; ++band) {
+        stack.insert(stack.end(), band_seeds_[band].begin(), band_seeds_[band].end());
+      }
+      floodGarbage(cls, stack);
+    }
   }
 
   band_lone_.resize(bands);
@@ -966,14 +1187,19 @@ KeyResult Keyer::key(const cv::Mat& bgr8, const std::string& source) {
   result.stats.unknown_px = unknown;
   result.stats.lone_unknown_px = lone;
   result.stats.garbage_px = garbage;
+  result.stats.shadow_px = shadows;
   cleanSilhouette(result.silhouette, alpha8_, options_, result.stats);
   if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
   return result;
 }
 
-cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen,
+cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen,
                 const KeyerOptions& options) {
-  checkImage(bgr8, "despill");
+  checkImage(frame, "despill");
+  // Blue screen: despilled in the working order (blue and green swapped) and swapped back.
+  cv::Mat swapped;
+  if (screen.backdrop == Backdrop::kBlue) swapBlueGreen(frame, swapped);
+  const cv::Mat& bgr8 = screen.backdrop == Backdrop::kBlue ? swapped : frame;
   if (key.alpha.size() != bgr8.size() || key.alpha.type() != CV_32FC1) {
     fail("needs the key's soft alpha (CV_32FC1, the image's size; KeyerOptions::soft_alpha)",
          "despill");
@@ -994,6 +1220,12 @@ cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& sc
       const float alpha = a[x];
       if (alpha >= 1.0f) {
         q[0] = p[0];
+        q[1] = p[1];
+        q[2] = p[2];
+        continue;
+      }
+      if (alpha <= 0.0f && screen.backdrop == Backdrop::kNone) {
+        q[0] = p[0];  // no screen: nothing spilt
         q[1] = p[1];
         q[2] = p[2];
         continue;
@@ -1028,7 +1260,13 @@ cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& sc
         }
       }
       float bb, bgreen, br;
-      if (n == 0) {
+      if (n == 0 && use_plate && screen.backdrop == Backdrop::kNone) {
+        // No background in reach: the plate here at the frame's exposure.
+        const std::uint8_t* pl = screen.plate.ptr<std::uint8_t>(y) + 3 * x;
+        bb = lut[pl[0]] * screen.exposure_gain;
+        bgreen = lut[pl[1]] * screen.exposure_gain;
+        br = lut[pl[2]] * screen.exposure_gain;
+      } else if (n == 0) {
         // No screen in reach (a hole or a soft interior): the key colour at this brightness.
         const float k = cg / std::max(screen.key_color[1], 1e-6f);
         bb = screen.key_color[0] * k;
@@ -1050,6 +1288,10 @@ cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& sc
       q[1] = linearToSrgb8(std::max(0.0f, (cg - rest * bgreen) * inv));
       q[2] = linearToSrgb8(std::max(0.0f, (cr - rest * br) * inv));
     }
+  }
+  if (screen.backdrop == Backdrop::kBlue) {
+    swapBlueGreen(out, swapped);
+    return swapped;
   }
   return out;
 }

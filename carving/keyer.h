@@ -1,6 +1,8 @@
 #pragma once
-// Green-screen chroma keyer: soft alpha and a binary silhouette per camera frame, and spill
-// suppression of the main plate for the compositor. The screen colour is estimated per camera,
+// Green- or blue-screen chroma keyer: soft alpha and a binary silhouette per camera frame, and
+// spill suppression of the main plate for the compositor. A blue screen is keyed exactly as a
+// green one with the blue and green channels swapped: every rule below is symmetric in the two
+// other channels, so "green" reads "the screen's channel" throughout. The screen colour is estimated per camera,
 // from a clean plate when given, else from the frame itself; the key is robust to uneven light
 // and to the actor's shadows on the floor (a shadowed screen is still screen).
 //
@@ -24,6 +26,13 @@
 //     (for a straight edge that tells on which side the pixel's centre lies, its own alpha does
 //     not). Then connected components: specks and holes smaller than the options' sizes are
 //     removed / filled (no morphological opening: thin limbs survive).
+// No screen (Backdrop::kNone): step 1 is a difference against the clean plate instead. The
+// frame's exposure relative to the plate is the median ratio of their brightness (the actor
+// covers a minority of a witness frame); a pixel within the noise tolerance (from the plate's
+// and the frame's estimated sensor noise) of the plate at that exposure is background; one that
+// is the plate darkened by a factor in [min_shadow, 1] with its colour kept is a shadow, also
+// background; twice the tolerance away from both is foreground; between is unknown. Steps 2 and
+// 3 are the same, with the plate as the local background.
 // One Keyer per camera: the screen model is estimated once (plate or first frame) and reused; a
 // Keyer keeps per-camera state and scratch, so key cameras in parallel with one Keyer each.
 #include <cstdint>
@@ -34,7 +43,20 @@
 
 namespace previz::carving {
 
+// The backdrop a camera is keyed against.
+enum class Backdrop {
+  kAuto,   // green or blue, whichever screen the clean plate (else the first frame) shows; no
+           // screen in the clean plate: kNone
+  kGreen,
+  kBlue,   // keyed as green with the blue and green channels swapped (the model is symmetric)
+  kNone,   // no screen (a set, a room): keyed by difference against the camera's clean plate
+};
+const char* toString(Backdrop backdrop);
+// "auto" | "green" | "blue" | "none"; throws Error naming the value.
+Backdrop backdropFromString(const std::string& name);
+
 struct KeyerOptions {
+  Backdrop backdrop = Backdrop::kAuto;
   // Silhouette = alpha at or above this after cleaning.
   double silhouette_threshold = 0.5;
   // Connected specks of the silhouette smaller than this (px) are removed, and holes smaller than
@@ -59,6 +81,11 @@ struct KeyerOptions {
   // Fill KeyResult::alpha (CV_32FC1). Carving needs only the silhouette: false saves writing
   // the float image (~0.1 ms of a witness camera's ~2 ms, ~0.5 ms of the main camera's).
   bool soft_alpha = true;
+  // Difference keying (no screen): a pixel that is its plate colour darkened by a factor in
+  // [min_shadow, 1] within noise is a shadow on the set, background. Deeper is foreground (dark
+  // hair over an oak floor is the floor darkened 3-4x, with the floor's hue). Set it to the
+  // lights' deepest shadow, fill / (fill + key): the synthetic studio's is 0.43.
+  double min_shadow = 0.4;
   int threads = 0;  // OpenMP threads for one key() call (0 = OpenMP's default)
   void validate() const;  // throws Error naming the field
 };
@@ -73,9 +100,12 @@ struct GarbageModel {
 };
 
 // What the keyer knows about one camera's screen (estimated once per camera, then reused).
+// Colours here are in the keyer's working order: B, G, R for a green screen, G, B, R for a blue
+// one (the screen's channel is always the second), and so is the plate.
 struct ScreenModel {
-  cv::Vec3f key_color;          // linear RGB of the lit screen, channel order B, G, R
-  float key_q = 0;              // (G - max(R, B)) / G of key_color: the screen's chroma
+  Backdrop backdrop = Backdrop::kGreen;  // green or blue (never kAuto once estimated)
+  cv::Vec3f key_color;          // linear colour of the lit screen (working order)
+  float key_q = 0;              // (S - max of the others) / S of key_color: the screen's chroma
   bool from_clean_plate = false;
   // Clean plate only: the plate (CV_8UC3); its linear green (CV_32FC1: the screen's
   // illumination, uneven light and falloff included); the garbage zone (CV_8UC1, 255 =
@@ -88,6 +118,10 @@ struct ScreenModel {
   cv::Mat garbage_zone;
   cv::Mat plate_green_range;
   GarbageModel garbage;         // no clean plate: re-estimated on every frame
+  // Difference keying: the plate's sensor noise (grey levels, estimated from the plate) and the
+  // last frame's exposure relative to the plate (its robust median ratio).
+  float plate_noise = 0;
+  float exposure_gain = 1;
 };
 
 struct KeyStats {
@@ -96,6 +130,7 @@ struct KeyStats {
   int garbage_px = 0;      // pixels dropped by the garbage matte
   int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
   int holes_filled = 0;    // holes filled (smaller than min_hole_px)
+  int shadow_px = 0;       // difference keying: pixels taken for shadows on the set
 };
 
 struct KeyResult {
@@ -129,6 +164,11 @@ class Keyer {
   KeyerOptions options_;
   ScreenModel screen_;
   bool has_screen_ = false;
+  // The frame in working order (blue screen: blue and green swapped; green: the frame itself).
+  const cv::Mat& working(const cv::Mat& bgr8);
+  void chooseBackdrop(const cv::Mat& bgr8, const std::string& source, bool is_plate);
+  Backdrop backdrop_ = Backdrop::kAuto;  // resolved on the plate or the first frame
+  cv::Mat swapped_;
   cv::Mat garbage_memory_;  // CV_8UC1: garbage zone of earlier frames (no clean plate)
   // Scratch reused from frame to frame (the hot loops allocate nothing).
   cv::Mat classes_, alpha8_, need_rows_;

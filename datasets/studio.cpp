@@ -46,6 +46,23 @@ void checkConfig(const StudioConfig& c) {
 
 }  // namespace
 
+const char* toString(Backdrop backdrop) {
+  switch (backdrop) {
+    case Backdrop::kGreen: return "green";
+    case Backdrop::kBlue: return "blue";
+    case Backdrop::kSet: return "set";
+  }
+  return "?";
+}
+
+Backdrop backdropFromString(const std::string& name) {
+  for (Backdrop b : {Backdrop::kGreen, Backdrop::kBlue, Backdrop::kSet})
+    if (name == toString(b)) return b;
+  ErrorContext context;
+  context.field = "backdrop";
+  throw Error("studio: unknown backdrop '" + name + "' (green, blue or set)", context);
+}
+
 Studio::Studio(const StudioConfig& config) : config_(config), prop_(detail::makePropSpec()) {
   checkConfig(config_);
 }

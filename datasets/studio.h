@@ -37,6 +37,13 @@ struct PropSpec {
   std::vector<PropTag> tags;
 };
 
+// What the stage is dressed in: a green or a blue cyclorama, or no screen at all (a set: a
+// painted-panel wall and a wooden floor on the same surfaces, keyed by difference against a
+// clean plate). The geometry, the lights and the shadows are the same in all three.
+enum class Backdrop { kGreen, kBlue, kSet };
+const char* toString(Backdrop backdrop);
+Backdrop backdropFromString(const std::string& name);  // "green" | "blue" | "set"; throws Error
+
 struct StudioConfig {
   std::uint64_t seed = 1;
   double stage_size_m = 4.0;       // square acting area centred on the world origin
@@ -45,6 +52,7 @@ struct StudioConfig {
   double take_duration_s = 10.0;   // actor and prop paths are parametrised over this
   bool with_actor = true;
   bool with_prop = true;
+  Backdrop backdrop = Backdrop::kGreen;
 };
 
 class Studio {

@@ -23,6 +23,9 @@ constexpr double kStudioHalf = 15.0, kStudioHeight = 9.0;
 constexpr double kEps = 1e-9;
 
 const Eigen::Vector3f kScreenGreen(0.08f, 0.45f, 0.12f);
+// Chroma-key blue paint, as saturated as the green (its q = (B - max(R, G)) / B is 0.76 where the
+// green's is 0.73) and darker, as blue screens are.
+const Eigen::Vector3f kScreenBlue(0.05f, 0.11f, 0.46f);
 
 enum StagePiece : int { kFloor = 0, kBackWall = 1, kLeftWall = 2, kCove = 3 };
 enum StudioPiece : int { kStudioFloor = 0, kStudioWalls = 1 };
@@ -72,7 +75,7 @@ struct LowFrequency {
 class StagePrimitive final : public Primitive {
  public:
   StagePrimitive(const StudioConfig& config, ShadowCasters casters)
-      : half_(0.5 * config.cyc_size_m),
+      : backdrop_(config.backdrop), half_(0.5 * config.cyc_size_m),
         wall_height_(config.wall_height_m),
         seed_(static_cast<std::uint32_t>(hashKey(config.seed, 0x57A6E))),
         low_(config.seed),
@@ -134,10 +137,37 @@ class StagePrimitive final : public Primitive {
     const double rho = std::sqrt(p.x() * p.x() + p.y() * p.y());
     const double fill = kFillLight * (1.0 - 0.2 * std::min(1.0, rho / half_));
     const double key = kKeyLightGain * keyLight(p, n) * keyVisibility(casters_, p);
-    hit.rgb = (kScreenGreen * static_cast<float>((fill + key) * variation)).cwiseMin(1.0f);
+    hit.rgb = (albedo(p, hit.object, u, v) * static_cast<float>((fill + key) * variation)).cwiseMin(1.0f);
   }
 
  private:
+  // The surface's own colour. The set: a wall of painted panels 0.6 m wide in four muted
+  // colours with a darker seam between them, and a teal painted concrete floor in slabs;
+  // texture at every scale (a difference keyer must not rely on a uniform background). The coves
+  // take the wall's panels. The floor's hue is none of the actor's or the crate's: where an
+  // object is the floor darkened with the floor's hue, no per-pixel test tells it from a shadow
+  // (measured with an oak floor: skin in shade; with a grey one: the grey crate and backpack).
+  Eigen::Vector3f albedo(const Eigen::Vector3d& p, int piece, double u, double v) const {
+    if (backdrop_ == Backdrop::kGreen) return kScreenGreen;
+    if (backdrop_ == Backdrop::kBlue) return kScreenBlue;
+    if (piece == kFloor) {
+      // Teal painted concrete in 1 m slabs: per-slab tone, trowel marks, dark joints.
+      const double sx = std::floor(p.x()), sy = std::floor(p.y());
+      const double tone = valueNoise(sx * 7.3 + sy * 3.1, 0.0, 1.0, seed_ ^ 0x0A4u);
+      const double marks = valueNoise(p.x(), p.y(), 0.03, seed_ ^ 0x6A1u);
+      const bool joint = std::abs(p.x() - sx - 0.5) > 0.494 || std::abs(p.y() - sy - 0.5) > 0.494;
+      const float k = static_cast<float>((joint ? 0.5 : 1.0) * (0.9 + 0.08 * tone + 0.05 * marks));
+      return Eigen::Vector3f(0.10f, 0.24f, 0.26f) * k;
+    }
+    static const Eigen::Vector3f kPanels[4] = {{0.42f, 0.36f, 0.28f}, {0.22f, 0.30f, 0.34f},
+                                               {0.36f, 0.22f, 0.20f}, {0.30f, 0.32f, 0.24f}};
+    const double panel = std::floor(u / 0.6);
+    const int index = static_cast<int>(static_cast<long long>(std::abs(panel * 3 + std::floor(v / 1.5))) % 4);
+    const double seam = std::abs(u / 0.6 - panel - 0.5) > 0.47 ? 0.5 : 1.0;
+    const double brush = valueNoise(u * 3.0, v * 0.4, 0.05, seed_ ^ 0x9B3u);
+    return kPanels[index] * static_cast<float>(seam * (0.92 + 0.1 * brush));
+  }
+
   // Where the ray leaves R (see the file comment); false if it never does.
   bool exitCyclorama(const Ray& ray, double& t, int& piece, Eigen::Vector3d& n) const {
     const Eigen::Vector3d& o = ray.origin;
@@ -240,6 +270,7 @@ class StagePrimitive final : public Primitive {
     return true;
   }
 
+  Backdrop backdrop_;
   double half_, wall_height_;
   std::uint32_t seed_;
   LowFrequency low_;

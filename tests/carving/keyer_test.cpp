@@ -48,6 +48,12 @@ cv::Mat foregroundTruth(const cv::Mat& labels) {
 }
 
 struct Studio {
+  explicit Studio(synth::Backdrop backdrop = synth::Backdrop::kGreen) : config(configWith(backdrop)) {}
+  static synth::StudioConfig configWith(synth::Backdrop backdrop) {
+    synth::StudioConfig c;
+    c.backdrop = backdrop;
+    return c;
+  }
   synth::StudioConfig config;
   synth::Studio studio{config};
   Rig rig = synth::studioRig(synth::StudioRigOptions{}, config.take_duration_s, true);
@@ -57,7 +63,7 @@ struct Studio {
   // 'shift_px': the pixel-centre ray of each pixel moved by this (the truth labels at a sample).
   synth::RenderedView render(int index, double time_s, unsigned layers, bool truth = true,
                              double noise_sigma = 0.0,
-                             const Eigen::Vector2d& shift_px = Eigen::Vector2d::Zero()) const {
+                             const Eigen::Vector2d& shift_px = Eigen::Vector2d::Zero(), double gain = 1.0) const {
     const RigCamera& c = rig.cameras[static_cast<size_t>(index)];
     const Pose T_world_cam = c.role == "main"
                                  ? synth::mainCameraPose(time_s, config.take_duration_s, true)
@@ -67,6 +73,7 @@ struct Studio {
     options.camera_index = index;
     options.truth = truth;
     options.noise_sigma = noise_sigma;
+    options.gain = gain;
     // Pixels are K (distorted point) + (cx, cy): a principal point moved by -d puts pixel
     // (u, v)'s centre ray where the original camera's ray through (u, v) + d is.
     Camera camera = c.camera;
@@ -210,6 +217,116 @@ TEST(KeyerStudio, WitnessSilhouettesMatchTruthWithAndWithoutCleanPlate) {
     }
 }
 
+// The blue stage (same actor, same lights): every witness on the three frames with sensor noise
+// of 2 grey levels, keyed with the backdrop left to the keyer (auto), with and without a clean
+// plate. The keyer finds the blue screen on its own, the silhouettes meet the green keyer's
+// bound, and the floor shadows stay out.
+TEST(KeyerStudio, BlueScreenWitnessesMatchTruth) {
+  const Studio s(synth::Backdrop::kBlue);
+  std::vector<double> ious[2];
+  long long shadow_total = 0, shadow_in[2] = {};
+  for (int cam = 0; cam < static_cast<int>(s.rig.cameras.size()); ++cam) {
+    if (s.rig.cameras[static_cast<size_t>(cam)].role != "witness") continue;
+    const std::string name = s.rig.cameras[static_cast<size_t>(cam)].camera.name;
+    const cv::Mat clean = s.render(cam, kTimes[0], synth::kLayerStage, false).bgr;
+    Keyer from_frame, from_plate;
+    from_plate.setCleanPlate(s.render(cam, kTimes[0], synth::kLayerStage, false, 2.0).bgr, name + " clean plate");
+    EXPECT_EQ(from_plate.screen().backdrop, Backdrop::kBlue) << name;
+    for (double t : kTimes) {
+      const synth::RenderedView view = s.render(cam, t, synth::kLayersPlate);
+      const cv::Mat noisy = s.render(cam, t, synth::kLayersPlate, false, 2.0).bgr;
+      const cv::Mat truth = foregroundTruth(view.labels);
+      const cv::Mat shadow = shadowPixels(view.bgr, clean, view.labels);
+      shadow_total += cv::countNonZero(shadow);
+      const std::string source = name + " t=" + std::to_string(t);
+      const KeyResult keys[2] = {from_frame.key(noisy, source), from_plate.key(noisy, source)};
+      EXPECT_EQ(from_frame.screen().backdrop, Backdrop::kBlue) << source;
+      for (int mode = 0; mode < 2; ++mode) {
+        ious[mode].push_back(iou(keys[mode].silhouette, truth));
+        EXPECT_GE(ious[mode].back(), 0.99) << source << (mode ? " with" : " without") << " clean plate";
+        shadow_in[mode] += cv::countNonZero(shadow & keys[mode].silhouette);
+      }
+      std::printf("%-10s %.1f blue screen IoU %.4f (frame) %.4f (plate)\n", name.c_str(), t, ious[0].back(),
+                  ious[1].back());
+    }
+  }
+  ASSERT_EQ(ious[0].size(), 24u);
+  ASSERT_GT(shadow_total, 20000);
+  for (int mode = 0; mode < 2; ++mode) {
+    std::sort(ious[mode].begin(), ious[mode].end());
+    std::printf("blue screen, noise 2, %s clean plate: IoU min %.4f median %.4f; floor-shadow px in silhouette %.5f\n",
+                mode ? "with" : "without", ious[mode].front(), ious[mode][12],
+                static_cast<double>(shadow_in[mode]) / shadow_total);
+    EXPECT_LE(static_cast<double>(shadow_in[mode]) / shadow_total, 0.001);
+  }
+}
+
+// No screen: the set (painted panels, an oak floor, the same lights and shadows), each witness
+// with its clean plate, sensor noise 2 on plate and frames, and the frames' exposure drifting
+// +3 %, -3 %, 0 % from the plate's. The backdrop is left to the keyer (auto: no screen in the
+// plate, so difference keying). Beside it, the green keyer with its plate on the green studio,
+// same frames, same noise and drift. Measured: difference IoU median 0.991, min 0.955 (22 of 24
+// at or above 0.97), no floor-shadow pixel keyed; green 0.9953 / 0.9918. What is lost is where
+// the actor is the background within noise: hair lit by the fill alone in front of the black
+// drapes (both ~0.03 linear, within 3 sigma of two noisy images: 10 levels), and a grey crate
+// face that is a grey-green panel darkened with its hue (a shadow to a per-pixel test).
+TEST(KeyerStudio, NoScreenSetKeyedByDifferenceAgainstTheCleanPlate) {
+  const Studio set(synth::Backdrop::kSet), green(synth::Backdrop::kGreen);
+  const double kGain[3] = {1.03, 0.97, 1.0};
+  std::vector<double> ious[2];  // [set, green]
+  long long keyed[2] = {}, shadow_in[2] = {}, shadow_total = 0;
+  for (int cam = 0; cam < static_cast<int>(set.rig.cameras.size()); ++cam) {
+    if (set.rig.cameras[static_cast<size_t>(cam)].role != "witness") continue;
+    const std::string name = set.rig.cameras[static_cast<size_t>(cam)].camera.name;
+    Keyer keyers[2];
+    const Studio* studios[2] = {&set, &green};
+    cv::Mat clean[2];
+    for (int k = 0; k < 2; ++k) {
+      clean[k] = studios[k]->render(cam, kTimes[0], synth::kLayerStage, false).bgr;
+      keyers[k].setCleanPlate(studios[k]->render(cam, kTimes[0], synth::kLayerStage, false, 2.0).bgr,
+                              name + " clean plate");
+    }
+    EXPECT_EQ(keyers[0].screen().backdrop, Backdrop::kNone) << name;
+    EXPECT_EQ(keyers[1].screen().backdrop, Backdrop::kGreen) << name;
+    for (int i = 0; i < 3; ++i) {
+      const double t = kTimes[i];
+      const std::string source = name + " t=" + std::to_string(t);
+      double v[2];
+      for (int k = 0; k < 2; ++k) {
+        const synth::RenderedView view = studios[k]->render(cam, t, synth::kLayersPlate, true, 0.0, {}, kGain[i]);
+        const cv::Mat frame =
+            studios[k]->render(cam, t, synth::kLayersPlate, false, 2.0, Eigen::Vector2d::Zero(), kGain[i]).bgr;
+        const cv::Mat truth = foregroundTruth(view.labels);
+        // Floor shadows: 15 % darker than the plate, more than the drift.
+        const cv::Mat shadow = shadowPixels(view.bgr, clean[k], view.labels);
+        if (k == 0) shadow_total += cv::countNonZero(shadow);
+        const KeyResult key = keyers[k].key(frame, source);
+        v[k] = iou(key.silhouette, truth);
+        ious[k].push_back(v[k]);
+        keyed[k] += cv::countNonZero(key.silhouette);
+        shadow_in[k] += cv::countNonZero(shadow & key.silhouette);
+        if (k == 0) {
+          EXPECT_GE(v[k], 0.95) << source;
+          // The exposure found is the drift (the plate's gain is 1).
+          EXPECT_NEAR(keyers[k].screen().exposure_gain, kGain[i], 0.01) << source;
+        }
+      }
+      std::printf("%-10s %.1f gain %.2f: set (difference) IoU %.4f, exposure %.4f | green (chroma) IoU %.4f\n",
+                  name.c_str(), t, kGain[i], v[0], keyers[0].screen().exposure_gain, v[1]);
+    }
+  }
+  ASSERT_EQ(ious[0].size(), 24u);
+  ASSERT_GT(shadow_total, 20000);
+  for (int k = 0; k < 2; ++k) {
+    std::sort(ious[k].begin(), ious[k].end());
+    std::printf("%s: IoU min %.4f median %.4f; floor-shadow px inside the silhouette %lld = %.4f %% of keyed px\n",
+                k == 0 ? "no screen, difference keying" : "green screen, chroma keying", ious[k].front(),
+                ious[k][12], shadow_in[k], 100.0 * static_cast<double>(shadow_in[k]) / keyed[k]);
+  }
+  EXPECT_GE(ious[0][12], 0.97);  // the median
+  EXPECT_LE(static_cast<double>(shadow_in[0]) / keyed[0], 0.005);
+}
+
 // A camera's footage has sensor noise: the same frame (t = 5.5 s, every witness, no clean plate,
 // as the default take is keyed) rendered with Gaussian noise of 2 grey levels keys nearly as
 // well as the noise-free render, and the noise adds no silhouette and almost no alpha away from
@@ -296,10 +413,13 @@ TEST(KeyerStudio, SoftAlphaMatchesTheExactCoverage) {
 }
 
 // Main plate: on the silhouette's edge (0.1 < alpha < 0.9) the raw pixel is a mix with the screen
-// (green above red and blue); despilled, it is the foreground's own colour. The truth is the same
-// frame rendered without the stage: C = alpha F + (1 - alpha) E with E the dark environment.
-TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
-  const Studio s;
+// (its channel above the other two); despilled, it is the foreground's own colour. The truth is
+// the same frame rendered without the stage: C = alpha F + (1 - alpha) E with E the dark
+// environment. 'screen': the screen's channel (B, G, R order); 'min_edge_px': edge pixels the
+// frame must offer; 'own_kept': the share of the screen-coloured costume's edge pixels that must
+// keep their own colour above the others.
+void checkDespill(synth::Backdrop backdrop, int screen, long long min_edge_px, double own_kept) {
+  const Studio s(backdrop);
   const int main = s.mainIndex();
   ASSERT_GE(main, 0);
   const double t = 8.5;  // walking along the front: the main camera sees the costume from the side
@@ -333,7 +453,7 @@ TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
         raw[ch] = srgbToLinear(c[ch]);
         after[ch] = srgbToLinear(o[ch]);
       }
-      auto excess = [](const double* v) { return v[1] - std::max(v[0], v[2]); };
+      auto excess = [&](const double* v) { return v[screen] - std::max(v[(screen + 1) % 3], v[(screen + 2) % 3]); };
       if (excess(f) > 0) {
         // The greenish costume's own edge: its green is not spill, and stays.
         ++greenish;
@@ -353,14 +473,14 @@ TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
       }
     }
   }
-  std::printf("main t=%.1f: %lld edge px; G > max(R, B) + 0.01: %lld before, %lld after; "
+  std::printf("%s screen, main t=%.1f: %lld edge px; screen channel above the others + 0.01: %lld before, %lld after; "
               "mean |F - F_true| (linear) %.4f before, %.4f after; costume edge px: %lld keep "
               "green above red and blue of %lld, mean |F - F_true| %.4f before, %.4f after; "
               "opaque px changed %lld/%lld\n",
-              t, edge, green_before, green_after, err_before / edge, err_after / edge,
+              synth::toString(backdrop), t, edge, green_before, green_after, err_before / edge, err_after / edge,
               greenish_kept, greenish, greenish_err_before / std::max(1LL, greenish),
               greenish_err_after / std::max(1LL, greenish), opaque_changed, opaque);
-  ASSERT_GT(edge, 1000);
+  ASSERT_GT(edge, min_edge_px);
   EXPECT_GT(green_before, edge / 2);            // the raw edges carry the screen
   EXPECT_LE(green_after, edge / 100);           // despilled: green no longer above red and blue
   EXPECT_LT(err_after / edge, 0.02);            // and the colour is the foreground's
@@ -368,9 +488,21 @@ TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
   EXPECT_EQ(opaque_changed, 0);                 // what is opaque is left as it is
   ASSERT_GT(opaque, 10000);
   ASSERT_GT(greenish, 20);
-  EXPECT_GE(greenish_kept, greenish * 3 / 4);  // the costume's own green is not spill
+  EXPECT_GE(greenish_kept, own_kept * greenish);  // the costume's own colour is not spill
   EXPECT_LT(greenish_err_after, 0.5 * greenish_err_before);
 }
+
+TEST(KeyerStudio, DespillRemovesScreenFromEdgesAndKeepsOpaqueColours) {
+  checkDespill(synth::Backdrop::kGreen, 1, 1000, 0.75);
+}
+
+// The same on the blue stage (the actor unchanged; the dark screen leaves fewer mixed edge
+// pixels: 936): blue spill removed as green is. The navy trousers are blue-dominant at half the
+// screen's chroma (the greenish costume on green: a quarter), so on their edges their own blue
+// and the screen's cannot be told apart: 169 of 652 keep blue above red and green, yet their
+// colour error still falls from 0.072 to 0.020 (the bound below: halved). Measured: edge error
+// 0.078 -> 0.006, blue above the others on 809 -> 4 of 936.
+TEST(KeyerStudio, DespillOfABlueScreen) { checkDespill(synth::Backdrop::kBlue, 0, 800, 0.2); }
 
 // A hand-made frame: the screen colour with a shadowed band, a thin limb (2 px), a speck, a
 // hole, a dark neutral tag-like patch inside a white box and a greenish-grey patch.

@@ -78,7 +78,8 @@ struct VisualHull {
 
 class Carver {
  public:
-  // cameras: the witness cameras carving uses (any subset of a rig, each with its distortion).
+  // cameras: the witness cameras carving uses (any subset of a rig, each with its distortion;
+  // any number of them).
   Carver(std::vector<RigCamera> cameras, const HullOptions& options = {});
   ~Carver();
   Carver(const Carver&) = delete;

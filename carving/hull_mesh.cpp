@@ -53,7 +53,7 @@ struct MeshBuilder {
     sign.assign(static_cast<size_t>(n_bricks) * 125, -1);
     brick_of.assign(h.surface_info.size(), -1);
     code.assign(h.surface_info.size(), 0);
-    const std::uint32_t all = h.usedMask();
+    const std::uint64_t* all = h.used_set.data();
 #pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
     for (int b = 0; b < n_bricks; ++b) {
       const detail::Brick& brick = h.bricks[b];
@@ -89,6 +89,7 @@ struct MeshBuilder {
     for (std::int64_t s = 0; s < n; ++s) {
       if (code[s] == 0 || code[s] == 255) continue;
       const detail::SurfaceInfo& info = h.surface_info[s];
+      const std::uint64_t* mixed = h.surfaceMixed(s);
       const auto& v = h.surface_voxel[s];
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       int count = 0;
@@ -102,7 +103,7 @@ struct MeshBuilder {
           if (!cornerInside(s, c)) std::swap(in, out);
           for (int it = 0; it < kRefineIterations; ++it) {
             const Eigen::Vector3d mid = 0.5 * (in + out);
-            (h.insideGiven(mid.data(), info.mixed, info.n_out, info.n_in) ? in : out) = mid;
+            (h.insideGiven(mid.data(), mixed, info.n_out, info.n_in) ? in : out) = mid;
           }
           sum += 0.5 * (in + out);
           ++count;

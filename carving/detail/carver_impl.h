@@ -34,21 +34,26 @@ struct Grid {
   int top_level = 0;
 };
 
-// A cell during carving: index at its level, the cameras known to see it wholly outside /
-// inside, and the cameras still undecided.
+// A cell during carving: index at its level and the cameras known to see it wholly outside /
+// inside (32-bit: rigs may hold hundreds of cameras; the cell stays 16 bytes). The cameras still
+// undecided are its mixed set, kept beside it (detail/hull_data.h).
 struct Cell {
   std::uint16_t x = 0, y = 0, z = 0;
   std::uint8_t level = 0;
-  std::uint8_t n_out = 0, n_in = 0;
-  std::uint32_t mixed = 0;
+  std::int32_t n_out = 0, n_in = 0;
 };
 
+// One work item's output: mixed cells with their sets (mixed_sets, set_words words each) and
+// inside cells (which need none). child_sets is the scratch of one parent's 8 children, sized
+// for the rig on first use: carving allocates nothing when warm.
 struct BlockOut {
   std::vector<Cell> mixed, inside;
+  std::vector<std::uint64_t> mixed_sets, child_sets;
   long long tested = 0;
   void clear() {
     mixed.clear();
     inside.clear();
+    mixed_sets.clear();
     tested = 0;
   }
 };

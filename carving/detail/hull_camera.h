@@ -24,8 +24,6 @@
 
 namespace previz::carving::detail {
 
-constexpr int kMaxCameras = 32;  // camera sets are 32-bit masks
-
 // Points nearer than this to a camera's image plane (camera z, metres) are not seen by it.
 constexpr double kZNear = 1e-3;
 // Added to every footprint (px): covers rounding between the lattice projection used for cells

@@ -5,6 +5,12 @@
 // inside / surface voxels). Surface voxels carry what carving learnt about them: the cameras
 // that see them wholly outside / inside, and the cameras still undecided (mixed) — the exact
 // point test inside a surface voxel only needs to look at those. Internal to carving/hull.cpp.
+//
+// Camera sets (the mixed cameras of a cell or surface voxel, the used cameras of a frame) are
+// bit sets of set_words 64-bit words, camera c at bit c % 64 of word c / 64, stored out of line
+// in flat arrays (set i at words i * set_words ...): one word up to 64 cameras, as many as the
+// rig needs beyond. Walking a set visits the cameras in index order, so the k-of-n rule's early
+// exits, and with them the results, do not depend on the word count.
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -18,10 +24,21 @@ namespace previz::carving::detail {
 constexpr int kBrickShift = 2;  // bricks of 4^3 finest voxels: one 64-bit mask each
 constexpr int kBrickEdge = 1 << kBrickShift;
 
+constexpr int kCamerasPerWord = 64;
+
+// Words of a camera set over n cameras.
+inline int cameraSetWords(int n_cameras) {
+  return (n_cameras + kCamerasPerWord - 1) / kCamerasPerWord;
+}
+inline int cameraSetCount(const std::uint64_t* set, int words) {
+  int n = 0;
+  for (int w = 0; w < words; ++w) n += __builtin_popcountll(set[w]);
+  return n;
+}
+
 struct SurfaceInfo {
-  std::uint32_t mixed = 0;  // cameras to test at a point of the voxel
-  std::uint8_t n_out = 0;   // cameras that see the whole voxel outside the silhouette
-  std::uint8_t n_in = 0;    // cameras that see the whole voxel inside
+  std::int32_t n_out = 0;  // cameras that see the whole voxel outside the silhouette
+  std::int32_t n_in = 0;   // cameras that see the whole voxel inside
 };
 
 struct Brick {
@@ -45,16 +62,23 @@ struct HullData {
   std::shared_ptr<const std::vector<CameraModel>> cameras;
   std::vector<FrameCam> frames;  // one per camera; !used = dropped this frame
   std::vector<int> used;         // indices of the used cameras
+  int set_words = 1;             // words per camera set (cameraSetWords of the rig's cameras)
+  std::vector<std::uint64_t> used_set;  // the used cameras as a set
 
   // Brick grid over the kept cells' bounding box (brick units).
   Eigen::Vector3i brick_min = Eigen::Vector3i::Zero(), brick_dims = Eigen::Vector3i::Zero();
   std::vector<std::int32_t> brick_index;  // kBrickEmpty, kBrickFull or index into bricks
   std::vector<Brick> bricks;
-  // Surface voxels in brick order (brick by brick, bit order within a brick).
+  // Surface voxels in brick order (brick by brick, bit order within a brick), with the cameras
+  // to test at a point of each (its mixed set, at surface_mixed.data() + index * set_words).
   std::vector<SurfaceInfo> surface_info;
+  std::vector<std::uint64_t> surface_mixed;
   std::vector<Eigen::Matrix<std::int32_t, 3, 1>> surface_voxel;
 
   bool hasCells() const { return !brick_index.empty(); }
+  const std::uint64_t* surfaceMixed(std::int64_t surface_index) const {
+    return surface_mixed.data() + surface_index * set_words;
+  }
 
   // Kind of finest voxel v; for surface voxels also its index into surface_*.
   inline VoxelKind voxelKind(int x, int y, int z, std::int64_t* surface_index = nullptr) const {
@@ -79,27 +103,23 @@ struct HullData {
 
   // The k-of-n rule at a point, testing only the cameras in 'mixed' and starting from counts
   // already known for the region the point lies in.
-  inline bool insideGiven(const double* p, std::uint32_t mixed, int n_out, int n_in) const {
+  inline bool insideGiven(const double* p, const std::uint64_t* mixed, int n_out,
+                          int n_in) const {
     int views = n_out + n_in;
     if (n_out > k) return false;
-    while (mixed) {
-      const int c = __builtin_ctz(mixed);
-      mixed &= mixed - 1;
-      const CamState s = pointState((*cameras)[c], frames[c], p);
-      if (s == kOut) {
-        if (++n_out > k) return false;
-        ++views;
-      } else if (s == kIn) {
-        ++views;
+    for (int w = 0; w < set_words; ++w) {
+      for (std::uint64_t bits = mixed[w]; bits; bits &= bits - 1) {
+        const int c = w * kCamerasPerWord + __builtin_ctzll(bits);
+        const CamState s = pointState((*cameras)[c], frames[c], p);
+        if (s == kOut) {
+          if (++n_out > k) return false;
+          ++views;
+        } else if (s == kIn) {
+          ++views;
+        }
       }
     }
     return views >= min_views;
-  }
-
-  std::uint32_t usedMask() const {
-    std::uint32_t m = 0;
-    for (int c : used) m |= std::uint32_t{1} << c;
-    return m;
   }
 
   // Exact point test (all used cameras); false outside the carved volume.
@@ -108,7 +128,7 @@ struct HullData {
       const double g = (p[a] - origin[a]) / voxel;
       if (!(g >= 0.0) || g > dims[a]) return false;
     }
-    return insideGiven(p, usedMask(), 0, 0);
+    return insideGiven(p, used_set.data(), 0, 0);
   }
 };
 

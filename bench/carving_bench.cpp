@@ -7,6 +7,9 @@
 // so that their figures do not move with the keyer's; the keyer is timed on the rendered plates
 // and its silhouettes' IoU against the true foreground (actor and props: the keyer keys both) is
 // printed, also on the witness plates with sensor noise added (sigma 2 grey levels).
+// Rigs of 8 to 128 witnesses (3_carve_cameras_N, 4_depth_cameras_N): analytic silhouettes of a
+// figure of capsules, so that the cost's growth with the camera count is measured apart from
+// the renderer's.
 // Besides Google Benchmark's table, one JSON line per stage:
 //   {"stage":..., "size":..., "ms":..., "budget_ms":..., "ratio_vs_dense":...}
 // "ms" is the median wall time of the runs, "ms_min" the fastest; "cpu_ms" the median CPU time of
@@ -25,6 +28,7 @@
 #include "carving/hull.h"
 #include "carving/keyer.h"
 #include "carving/refine.h"
+#include "core/pose.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
@@ -408,6 +412,169 @@ void BM_Mesh(benchmark::State& state) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Rigs of any size: volumetric stages run 50-100+ witnesses. Rendering 128 studio views would
+// take minutes, so these rigs see a figure of capsules (a standing actor's size and limbs) with
+// analytic silhouettes: a pixel is inside when its centre's ray passes within a capsule's
+// radius of its axis.
+// ---------------------------------------------------------------------------------------------
+struct Capsule {
+  Eigen::Vector3d a, b;
+  double radius;
+};
+const std::vector<Capsule>& figure() {
+  static const std::vector<Capsule> f = {
+      {{0.0, 0.0, 0.95}, {0.0, 0.0, 1.40}, 0.17},    // torso
+      {{0.0, 0.0, 1.60}, {0.0, 0.02, 1.66}, 0.11},   // head
+      {{-0.10, 0.0, 0.05}, {-0.10, 0.05, 0.90}, 0.07},  // legs
+      {{0.10, 0.0, 0.05}, {0.12, -0.08, 0.90}, 0.07},
+      {{-0.22, 0.0, 1.40}, {-0.45, 0.12, 0.95}, 0.05},  // arms
+      {{0.22, 0.0, 1.40}, {0.40, -0.20, 1.10}, 0.05},
+  };
+  return f;
+}
+const Eigen::AlignedBox3d kFigureBounds(Eigen::Vector3d(-0.55, -0.35, -0.05),
+                                        Eigen::Vector3d(0.55, 0.35, 1.80));
+
+// Squared distance from the ray o + t d (t >= 0, |d| = 1) to the segment [a, b]: the closest
+// point of the segment to the ray's line, then the ray's point nearest to it (exact when the
+// ray starts outside the capsule, as a camera does).
+double raySegmentDistance2(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                           const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  const Eigen::Vector3d e = b - a, w = a - o;
+  const double de = d.dot(e), ee = e.dot(e), dw = d.dot(w), ew = e.dot(w);
+  const double den = ee - de * de;
+  double s = den > 1e-12 ? std::clamp((de * dw - ew) / den, 0.0, 1.0) : 0.0;
+  const double t = std::max(0.0, dw + s * de);
+  s = std::clamp((t * de - ew) / ee, 0.0, 1.0);
+  return (o + t * d - (a + s * e)).squaredNorm();
+}
+
+cv::Mat figureSilhouette(const RigCamera& rc) {
+  const Camera& cam = rc.camera;
+  const Pose T_cam_world = rc.T_world_cam.inverse();
+  // Only the pixels of the figure's bounding box (every corner is in front of these cameras).
+  double umin = cam.width, umax = 0, vmin = cam.height, vmax = 0;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d p =
+        T_cam_world * kFigureBounds.corner(static_cast<Eigen::AlignedBox3d::CornerType>(c));
+    umin = std::min(umin, cam.fx * p.x() / p.z() + cam.cx);
+    umax = std::max(umax, cam.fx * p.x() / p.z() + cam.cx);
+    vmin = std::min(vmin, cam.fy * p.y() / p.z() + cam.cy);
+    vmax = std::max(vmax, cam.fy * p.y() / p.z() + cam.cy);
+  }
+  cv::Mat mask = cv::Mat::zeros(cam.height, cam.width, CV_8UC1);
+  const Eigen::Vector3d o = rc.T_world_cam.translation();
+  const Eigen::Matrix3d R = rc.T_world_cam.linear();
+  const int u0 = std::max(0, static_cast<int>(umin));
+  const int u1 = std::min(cam.width - 1, static_cast<int>(umax) + 1);
+  const int v0 = std::max(0, static_cast<int>(vmin));
+  const int v1 = std::min(cam.height - 1, static_cast<int>(vmax) + 1);
+  for (int v = v0; v <= v1; ++v)
+    for (int u = u0; u <= u1; ++u) {
+      const Eigen::Vector3d d =
+          (R * Eigen::Vector3d((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0)).normalized();
+      for (const Capsule& k : figure())
+        if (raySegmentDistance2(o, d, k.a, k.b) <= k.radius * k.radius) {
+          mask.at<std::uint8_t>(v, u) = 255;
+          break;
+        }
+    }
+  return mask;
+}
+
+// n witnesses 1280x720 (ideal lenses, ~65 degrees across) 4 m from the stage centre, at
+// heights 0.5-3 m, azimuths by the golden angle: rings as a volumetric stage has them.
+std::vector<RigCamera> witnessRings(int n) {
+  std::vector<RigCamera> rig(n);
+  const double golden_angle = M_PI * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    Camera& cam = rig[i].camera;
+    cam.name = "ring" + std::to_string(i);
+    cam.width = 1280;
+    cam.height = 720;
+    cam.fx = cam.fy = 1000;
+    cam.cx = 639.5;
+    cam.cy = 359.5;
+    const double z = 0.5 + 2.5 * (i + 0.5) / n;
+    rig[i].T_world_cam = lookAt(Eigen::Vector3d(4.0 * std::cos(golden_angle * i),
+                                                4.0 * std::sin(golden_angle * i), z),
+                                Eigen::Vector3d(0, 0, 1.0));
+  }
+  return rig;
+}
+
+struct RingCase {
+  std::vector<RigCamera> witnesses;
+  Silhouettes silhouettes;
+  RigCamera main;  // 1920x1080 in front of the figure
+  cv::Mat main_mask;
+  std::unique_ptr<Carver> carver;
+  VisualHull hull;
+};
+RingCase& ringCase(int cameras, int threads) {
+  static std::map<std::pair<int, int>, RingCase> cases;
+  RingCase& c = cases[{cameras, threads}];
+  if (!c.carver) {
+    c.witnesses = witnessRings(cameras);
+    c.silhouettes.masks.resize(cameras);
+    std::vector<std::thread> pool;
+    const int workers = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    for (int th = 0; th < workers; ++th)
+      pool.emplace_back([&, th] {
+        for (int i = th; i < cameras; i += workers)
+          c.silhouettes.masks[i] = figureSilhouette(c.witnesses[i]);
+      });
+    for (auto& t : pool) t.join();
+    c.main.camera = c.witnesses[0].camera;
+    c.main.camera.name = "main";
+    c.main.camera.width = 1920;
+    c.main.camera.height = 1080;
+    c.main.camera.fx = c.main.camera.fy = 1500;
+    c.main.camera.cx = 959.5;
+    c.main.camera.cy = 539.5;
+    c.main.T_world_cam = lookAt(Eigen::Vector3d(0.8, -5.0, 1.6), Eigen::Vector3d(0, 0, 1.0));
+    c.main_mask = figureSilhouette(c.main);
+    HullOptions o;  // 5 mm, the live setting
+    o.threads = threads;
+    c.carver = std::make_unique<Carver>(c.witnesses, o);
+    c.hull = c.carver->carve(c.silhouettes);
+    c.carver->depth(c.hull, c.main, c.main_mask);  // the main lens' ray table, once per lens
+  }
+  return c;
+}
+
+void BM_CarveCameras(benchmark::State& state) {
+  const int cameras = static_cast<int>(state.range(0));
+  const int threads = benchThreads(state);
+  RingCase& c = ringCase(cameras, threads);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    c.hull = c.carver->carve(c.silhouettes);
+    char extra[160];
+    std::snprintf(extra, sizeof extra,
+                  "\"cameras\":%d,\"voxel_m\":0.005,\"surface_cells\":%lld,\"inside_cells\":%lld",
+                  cameras, c.hull.stats.surface_cells, c.hull.stats.inside_cells);
+    record("3_carve_cameras_" + std::to_string(cameras) + threadKey(threads), "carve",
+           std::to_string(cameras) + "x1280x720@5mm", sw, -1, threads, extra);
+  }
+}
+void BM_DepthCameras(benchmark::State& state) {
+  const int cameras = static_cast<int>(state.range(0));
+  const int threads = benchThreads(state);
+  RingCase& c = ringCase(cameras, threads);
+  for (auto _ : state) {
+    const Stopwatch sw;
+    cv::Mat d = c.carver->depth(c.hull, c.main, c.main_mask);
+    char extra[96];
+    std::snprintf(extra, sizeof extra, "\"cameras\":%d,\"voxel_m\":0.005,\"pixels\":%d",
+                  cameras, cv::countNonZero(c.main_mask));
+    record("4_depth_cameras_" + std::to_string(cameras) + threadKey(threads), "main_depth",
+           "1920x1080@5mm+" + std::to_string(cameras) + "x1280x720", sw, -1, threads, extra);
+    benchmark::DoNotOptimize(d.data);
+  }
+}
+
 // The dense reference: every cell centre of the grid, projected into every camera until one
 // carves it (k = 0, at least 2 views), occupancy written to a byte grid.
 struct DenseCamera {
@@ -503,6 +670,9 @@ BENCHMARK(BM_KeyMain)->Args({0, 1})->Args({0, 0})->Unit(benchmark::kMillisecond)
 BENCHMARK(BM_KeyBackdrop)->ArgsProduct({{0, 1, 2}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_Carve)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
 BENCHMARK(BM_Depth)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(15);
+// Args: {witnesses, threads}.
+BENCHMARK(BM_CarveCameras)->ArgsProduct({{8, 32, 64, 128}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
+BENCHMARK(BM_DepthCameras)->ArgsProduct({{8, 32, 64, 128}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_RefineDepth)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(5);
 BENCHMARK(BM_PhotoHull)->ArgsProduct({{5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_Mesh)->ArgsProduct({{10, 5}, {1, 0}})->Unit(benchmark::kMillisecond)->Iterations(3);

@@ -757,8 +757,9 @@ void buildBricks(HullData& h, const std::vector<Cell>& inside, const std::vector
     const detail::Brick& b = h.bricks[h.brick_index[brickOf(c.x, c.y, c.z)]];
     const std::uint64_t m = std::uint64_t{1} << (((c.z & 3) << 4) | ((c.y & 3) << 2) | (c.x & 3));
     const std::uint32_t pos = b.offset + __builtin_popcountll(b.surface & (m - 1));
-    std::copy_n(surface_sets.data() + i * words, words,
-                h.surface_mixed.data() + static_cast<size_t>(pos) * words);
+    // Word by word: std::copy_n of a run-time count is a memmove call per voxel.
+    for (int w = 0; w < words; ++w)
+      h.surface_mixed[static_cast<size_t>(pos) * words + w] = surface_sets[i * words + w];
     h.surface_info[pos].n_out = c.n_out;
     h.surface_info[pos].n_in = c.n_in;
     h.surface_voxel[pos] = Eigen::Matrix<std::int32_t, 3, 1>(c.x, c.y, c.z);

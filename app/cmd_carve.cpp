@@ -19,6 +19,7 @@ namespace {
 struct CarveArgs {
   std::string take, rig, out, masks, main_poses;
   std::string frames, shard = "0/1", volume, depth_camera, depth_cameras, cameras;
+  int voxel_cells = 0;
   double voxel_m = 0.005;
   int k = 0;
   int min_views = 2;
@@ -48,7 +49,12 @@ int runCarve(const CarveArgs& a) {
   o.hull.k = a.k;
   o.hull.min_views = a.min_views;
   o.hull.threads = a.threads;
-  if (!a.volume.empty()) o.hull.volume = parseVolume(a.volume);
+  if (a.volume == "auto") {
+    o.volume_from_silhouettes = true;
+  } else if (!a.volume.empty()) {
+    o.hull.volume = parseVolume(a.volume);
+  }
+  o.voxel_cells = a.voxel_cells;
   o.depth_camera = a.depth_camera;
   o.carve_cameras = splitList(a.cameras);
   o.depth_inside_silhouette = !a.depth_everywhere;
@@ -134,7 +140,10 @@ Runner addCarveCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--voxel", a->voxel_m, "Finest cell edge, metres")->capture_default_str();
   cmd->add_option("--volume", a->volume,
-                  "Carved volume x0,y0,z0,x1,y1,z1 (world, metres; default the 4 x 4 x 2.5 m stage)");
+                  "Carved volume x0,y0,z0,x1,y1,z1 (world, metres; default the 4 x 4 x 2.5 m stage), or 'auto': "
+                  "found from the first frame's silhouettes in the rig's own units (cameras looking inward)");
+  cmd->add_option("--voxel-cells", a->voxel_cells,
+                  "With --volume auto: finest cell = the found volume's longest edge / N (any units; overrides --voxel)");
   cmd->add_option("--min-views", a->min_views, "Cameras that must see a cell for it to survive")
       ->capture_default_str();
   cmd->add_option("--masks", a->masks,

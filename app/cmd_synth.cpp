@@ -102,6 +102,12 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_option("--camera", o.camera, "Intrinsics preset: camera to film (main|witness|witness01..witnessNN)")
       ->capture_default_str();
   cmd->add_option("--overscan", o.cg_overscan, "CG render overscan fraction")->capture_default_str();
+  cmd->add_option("--backdrop", o.backdrop,
+                  "Studio preset: green | blue (cyclorama) | set (no screen: painted walls, concrete floor; "
+                  "writes clean plates)")
+      ->capture_default_str();
+  cmd->add_flag("--clean-plates", o.clean_plates,
+                "Studio preset: also write clean/<camera>.png, the empty stage from every static camera");
   cmd->add_option("--threads", o.threads, "OpenMP threads (0 = all cores)")->capture_default_str();
   cmd->add_flag("--static-main", args->static_main, "Keep the main camera fixed (no dolly move)");
   cmd->add_flag("--no-meshes", args->no_meshes, "Do not write truth/mesh/actor.*");

@@ -232,26 +232,61 @@ GarbageModel estimateGarbage(const cv::Mat& bgr8, const ClassifyTables& tables) 
     std::nth_element(v.begin(), v.begin() + k, v.end());
     return v[k];
   };
-  model.r = quantile(rs, 0.5);
-  model.b = quantile(bs, 0.5);
-  // Spread of the surroundings' chroma (robust: 80th percentile of the distance to the median),
-  // 0.05 to 0.08: 8-bit quantisation of a dark neutral moves r, b by ~0.01, noise by more; the
-  // costume's dark blue trousers in shadow sit ~0.11 from the studio's grey.
-  std::vector<float> dist(rs.size());
+  // The first colour from every off-screen sample; a further one from the samples the colours
+  // before it leave, only when it holds a twentieth of the border: a second surface around the
+  // screen (the dino's wall: 7 %), not the actor crossing the border (whose colours are many
+  // and each small).
+  // Near-black samples (black drapes, a dark band at the frame's edge) have no chroma to speak
+  // of: one mode of any chroma up to their brightness, when they hold a tenth of the border.
+  constexpr float kBlack = 0.03f;  // linear R + G + B: codes below ~30 each
+  std::vector<float> left_r, left_b, left_s;
+  size_t black = 0;
   for (size_t i = 0; i < rs.size(); ++i) {
-    dist[i] = std::max(std::abs(rs[i] - model.r), std::abs(bs[i] - model.b));
+    if (sums[i] < kBlack) {
+      ++black;
+      continue;
+    }
+    left_r.push_back(rs[i]);
+    left_b.push_back(bs[i]);
+    left_s.push_back(sums[i]);
   }
-  model.tolerance = std::clamp(1.5f * quantile(dist, 0.8), 0.05f, 0.08f);
-  // Brightest accepted: 1.5x the 95th percentile of the samples that match the chroma (the
-  // studio's floor is brighter than its drapes and may barely reach the border; the
-  // greenish-grey costume in shadow is ~3x the drapes' brightness).
-  std::vector<float> matching;
-  for (size_t i = 0; i < rs.size(); ++i) {
-    if (dist[i] <= model.tolerance) matching.push_back(sums[i]);
+  if (black >= std::max<size_t>(16, border_samples / 10)) {
+    model.modes[model.count++] = GarbageMode{1.0f / 3, 1.0f / 3, 1.0f, kBlack};
+  } else {
+    left_r = rs, left_b = bs, left_s = sums;  // too few to be a surface of their own
   }
-  if (matching.size() < 16) return model;
-  model.max_sum = 1.5f * quantile(matching, 0.95);
-  model.valid = true;
+  for (int m = model.count; m < 3 && left_r.size() >= 16; ++m) {
+    GarbageMode mode;
+    mode.r = quantile(left_r, 0.5);
+    mode.b = quantile(left_b, 0.5);
+    // Spread of the surroundings' chroma (robust: 80th percentile of the distance to the
+    // median), 0.05 to 0.08: 8-bit quantisation of a dark neutral moves r, b by ~0.01, noise by
+    // more; the costume's dark blue trousers in shadow sit ~0.11 from the studio's grey.
+    std::vector<float> dist(left_r.size());
+    for (size_t i = 0; i < left_r.size(); ++i)
+      dist[i] = std::max(std::abs(left_r[i] - mode.r), std::abs(left_b[i] - mode.b));
+    mode.tolerance = std::clamp(1.5f * quantile(dist, 0.8), 0.05f, 0.08f);
+    // Brightest accepted: 1.5x the 95th percentile of the samples that match the chroma (the
+    // studio's floor is brighter than its drapes and may barely reach the border; the
+    // greenish-grey costume in shadow is ~3x the drapes' brightness).
+    std::vector<float> matching, next_r, next_b, next_s;
+    for (size_t i = 0; i < left_r.size(); ++i) {
+      if (dist[i] <= mode.tolerance) {
+        matching.push_back(left_s[i]);
+      } else {
+        next_r.push_back(left_r[i]);
+        next_b.push_back(left_b[i]);
+        next_s.push_back(left_s[i]);
+      }
+    }
+    if (matching.size() < 16 || (m > 0 && matching.size() < border_samples / 20)) break;
+    mode.max_sum = 1.5f * quantile(matching, 0.95);
+    model.modes[model.count++] = mode;
+    left_r.swap(next_r);
+    left_b.swap(next_b);
+    left_s.swap(next_s);
+  }
+  model.valid = model.count > 0;
   return model;
 }
 
@@ -269,10 +304,14 @@ struct ClassifyParams {
 // clear foreground; 0: neither.
 int garbageLikeness(const GarbageModel& gm, float r, float g, float b) {
   const float s = r + g + b;
-  const float dr = std::abs(r - gm.r * s), db = std::abs(b - gm.b * s);
-  if (s <= gm.max_sum && dr <= gm.tolerance * s && db <= gm.tolerance * s) return 2;
-  if (s <= 1.5f * gm.max_sum && dr <= 2.0f * gm.tolerance * s && db <= 2.0f * gm.tolerance * s) return 1;
-  return 0;
+  int likeness = 0;
+  for (int m = 0; m < gm.count; ++m) {
+    const GarbageMode& mode = gm.modes[m];
+    const float dr = std::abs(r - mode.r * s), db = std::abs(b - mode.b * s);
+    if (s <= mode.max_sum && dr <= mode.tolerance * s && db <= mode.tolerance * s) return 2;
+    if (s <= 1.5f * mode.max_sum && dr <= 2.0f * mode.tolerance * s && db <= 2.0f * mode.tolerance * s) likeness = 1;
+  }
+  return likeness;
 }
 
 // Screen test of one row, 16 pixels per step: kScreen where the chroma and the green's range say

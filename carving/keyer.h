@@ -91,12 +91,17 @@ struct KeyerOptions {
 };
 
 // Colour of the non-screen surroundings seen along the image border (no clean plate): linear
-// chromaticity r = R / S, b = B / S with S = R + G + B, and the brightest S it reaches.
-struct GarbageModel {
-  bool valid = false;
+// chromaticity r = R / S, b = B / S with S = R + G + B, and the brightest S it reaches. Up to
+// three colours (a studio's black drapes; a turntable's wall above it and a black band beside).
+struct GarbageMode {
   float r = 0, b = 0;        // median chromaticity
   float tolerance = 0;       // accepted |r - r0|, |b - b0|
   float max_sum = 0;         // brightest accepted S (linear)
+};
+struct GarbageModel {
+  bool valid = false;
+  int count = 0;             // modes in use
+  GarbageMode modes[3];
 };
 
 // What the keyer knows about one camera's screen (estimated once per camera, then reused).

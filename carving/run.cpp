@@ -1,5 +1,6 @@
 // The per-frame carving job (see run.h).
 #include "carving/run.h"
+#include "carving/volume.h"
 
 #include <omp.h>
 #include <unistd.h>
@@ -155,6 +156,12 @@ void RunOptions::validate() const {
                 fieldContext("shard"));
   if (frames.first < 0 || (frames.end >= 0 && frames.end <= frames.first))
     throw Error("carve: frame range must have 0 <= first < end", fieldContext("frames"));
+  if (voxel_cells < 0 || voxel_cells > 4096)
+    throw Error("carve: voxel_cells must be in [0, 4096] (got " + std::to_string(voxel_cells) + ")",
+                fieldContext("voxel_cells"));
+  if (voxel_cells > 0 && !volume_from_silhouettes)
+    throw Error("carve: voxel_cells sizes cells from a found volume (volume_from_silhouettes)",
+                fieldContext("voxel_cells"));
   if (refine_depth) {
     refine.validate();
     photo_hull.validate();
@@ -458,6 +465,34 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
 
   std::vector<RigCamera> cameras;
   for (const std::string& name : m.carve_names) cameras.push_back(rig.at(name));
+  nlohmann::json volume_from = "given";
+  if (m.options.volume_from_silhouettes) {
+    int first = -1;
+    for (int f : take.frames())
+      if (m.options.frames.contains(f)) {
+        first = f;
+        break;
+      }
+    if (first < 0) throw Error("carve: no frame selected to find the volume from", fieldContext("frames"));
+    const FrameInputs in = m.readSilhouettes(first);
+    Silhouettes sil;
+    for (size_t j = 0; j < m.carve_names.size(); ++j) {
+      sil.masks.push_back(in.dropped[j].empty() ? in.silhouettes[j] : cv::Mat());
+      sil.dropped.push_back(in.dropped[j]);
+    }
+    FoundVolume found;
+    try {
+      found = volumeFromSilhouettes(cameras, sil, m.options.hull);
+    } catch (const Error& e) {
+      ErrorContext c = e.context();
+      c.frame = first;
+      throw Error("carve: finding the volume: " + e.message(), c);
+    }
+    m.options.hull.volume = found.box;
+    if (m.options.voxel_cells > 0) m.options.hull.voxel_m = found.box.sizes().maxCoeff() / m.options.voxel_cells;
+    volume_from = {{"frame", first}, {"look_at", {found.look_at.x(), found.look_at.y(), found.look_at.z()}},
+                   {"radius", found.radius}, {"voxel_cells", m.options.voxel_cells}};
+  }
   m.carver = std::make_unique<Carver>(std::move(cameras), m.options.hull);
 
   const HullOptions& h = m.options.hull;
@@ -466,6 +501,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
               {"min_views", h.min_views},
               {"volume", {h.volume.min().x(), h.volume.min().y(), h.volume.min().z(),
                           h.volume.max().x(), h.volume.max().y(), h.volume.max().z()}},
+              {"volume_from", volume_from},
               {"carve_cameras", m.carve_names},
               {"depth_camera", m.depth_name},
               {"extra_depth_cameras", m.extra_depth_names},

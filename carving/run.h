@@ -52,6 +52,12 @@ struct RunOptions {
   // mask, at its pose for the frame): e.g. every witness, for post. The depth camera itself and
   // repeats are left out. Only the depth camera gets depth_refined/.
   std::vector<std::string> extra_depth_cameras;
+  // Volume from the take's first selected frame (carving/volume.h): the carving cameras' look-at
+  // point and their silhouettes, in the rig's own units (hull.volume is then ignored); with
+  // voxel_cells > 0 the finest cell is the found box's longest edge / voxel_cells (hull.voxel_m
+  // ignored). Every shard and every resumed run finds the same box from the same frame.
+  bool volume_from_silhouettes = false;
+  int voxel_cells = 0;
   // Cameras that carve: empty = every camera with role "witness".
   std::vector<std::string> carve_cameras;
   // true: depth only inside the depth camera's silhouette (its key or mask); false: wherever

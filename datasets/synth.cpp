@@ -219,6 +219,7 @@ void SynthOptions::validate() const {
     badOption("preset", "is not a known preset (" + str(static_cast<int>(preset)) + ")");
   }
   if (frames <= 0) badOption("frames", "must be > 0 (got " + str(frames) + ")");
+  backdropFromString(backdrop);  // throws naming the field
   if (witness_cameras < 1 || witness_cameras > 99) {
     badOption("witness_cameras", "must be in [1, 99] (got " + str(witness_cameras) + ")");
   }
@@ -327,6 +328,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   config.take_duration_s = std::max(StudioConfig{}.take_duration_s, duration_s);
   config.with_actor = studio_preset;
   config.with_prop = studio_preset;
+  config.backdrop = backdropFromString(o.backdrop);
   const Studio studio(config);
 
   const BoardType board_type = boardTypeFromString(o.board);
@@ -473,6 +475,28 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   }
 
   double render_ms = 0, plate_ms = 0;
+  // Clean plates: the empty stage from every static camera (a moving main camera has none), with
+  // the camera's own gain and noise (a noise stream of their own: frame -1).
+  if (studio_preset && (o.clean_plates || config.backdrop == Backdrop::kSet)) {
+    const Scene empty = studio.sceneAt(0.0, kLayerStage);
+    for (const TakeCamera& c : cameras) {
+      if (c.moving) continue;
+      RenderOptions ro;
+      ro.samples_per_pixel = o.samples_per_pixel;
+      ro.gain = c.gain;
+      ro.blur_sigma_px = o.blur_sigma_px;
+      ro.noise_sigma = o.noise_sigma;
+      ro.seed = o.seed;
+      ro.camera_index = c.index;
+      ro.frame = -1;
+      ro.threads = o.threads;
+      ro.truth = false;
+      const Clock::time_point start = Clock::now();
+      const RenderedView view = renderView(c.rig.camera, c.rig.T_world_cam, empty, ro);
+      render_ms += msSince(start);
+      writeImageAtomic(out / "clean" / (c.rig.camera.name + ".png"), view.bgr);
+    }
+  }
   for (int f = 0; f < o.frames; ++f) {
     const double t = f / o.fps;
     if (board_preset) {

@@ -38,6 +38,11 @@ struct SynthOptions {
   std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree
   std::string camera = "main";   // intrinsics preset: "main", "witness" (= witness01) or a witness name
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
+  // Studio preset: what the stage is dressed in (datasets/studio.h Backdrop): green | blue | set
+  // (no screen). clean_plates: clean/<camera>.png of every static camera (the empty stage, same
+  // noise and gain); a set always has them (it is keyed by difference against them).
+  std::string backdrop = "green";
+  bool clean_plates = false;
   int threads = 0;               // OpenMP threads (0 = default)
   // Studio preset: the form of the cameras' streams, as a camera or a conform delivers them
   // (take/stream_writer.h; read back by the take model, take/take.h):

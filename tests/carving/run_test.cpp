@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "carving/keyer.h"
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -493,6 +494,80 @@ TEST(CarveRun, MiddleburyTempleFromProjectionRowsCoversTheLeftOutView) {
   // The README's tight box is 10.2 x 16.0 x 7.5 cm; the temple fills a good part of it.
   EXPECT_GT(r.volume_m3, 0.1 * 0.102 * 0.160 * 0.075);
   EXPECT_LT(r.volume_m3, 0.102 * 0.160 * 0.075);
+}
+
+const fs::path kDino = fs::path(PREVIZ_SHARED_DATA) / "oxford-dino";
+
+// The Oxford dino on its blue turntable: nothing from outside but the views and the projection
+// rows. Keyed by previz's own keyer (the blue backdrop found on its own: a blue turntable under a
+// greyish-blue wall, shading, a black band), the volume found from the cameras and the keys in
+// the data's own units, carved from 35 views (more than 32: the carver takes any number), and
+// the hull's depth in the 36th view, which it never saw, must cover that view's keyed object.
+TEST(CarveRun, OxfordDinoKeyedOnItsBlueBackdropCoversTheLeftOutView) {
+  ASSERT_TRUE(fs::exists(kDino / "dino.P.txt")) << "real data missing: " << kDino << " (../shared/data, see its README)";
+  const fs::path dir = test::scratchDir("carving_run", "dino");
+  writeJsonAtomic(dir / "take" / "take.json", {{"sources", {{"*", (kDino / "{camera}.png").string()}}}});
+  const Take take({dir / "take", kDino / "dino.P.txt", {}, {}});
+  ASSERT_EQ(take.rig().cameras.size(), 36u);
+  const std::string left_out = "viff020";
+  RunOptions o;
+  o.out = dir / "out";
+  o.volume_from_silhouettes = true;
+  o.voxel_cells = 256;
+  for (const RigCamera& rc : take.rig().cameras)
+    if (rc.camera.name != left_out) o.carve_cameras.push_back(rc.camera.name);
+  ASSERT_EQ(o.carve_cameras.size(), 35u);
+  o.depth_camera = left_out;
+  o.depth_inside_silhouette = false;
+  CarveJob job(take, o);
+  const RunSummary s = job.run();
+  ASSERT_TRUE(s.failed.empty()) << s.failed.front().reason;
+  ASSERT_EQ(s.carved.size(), 1u);
+  const FrameReport& r = s.carved.front();
+  const nlohmann::json report = readReport(job.reportPath(0));
+  EXPECT_TRUE(report["cameras_dropped"].empty()) << report["cameras_dropped"].dump();
+
+  // The left-out view's object, keyed as the job keys (auto backdrop: blue).
+  Keyer keyer;
+  const CameraFrame view = take.read(left_out, 0);
+  ASSERT_TRUE(view.ok()) << view.dropped;
+  const cv::Mat full_key = keyer.key(view.image, left_out).silhouette;
+  EXPECT_EQ(keyer.screen().backdrop, Backdrop::kBlue);
+  // The object is the key's largest blob: the key also keeps a 1-2 px column at the seam of the
+  // wall and the black band on the right (a mix of two background colours, neither's), which no
+  // other view sees where the dino is.
+  cv::Mat labels, stats, centroids;
+  cv::connectedComponentsWithStats(full_key, labels, stats, centroids, 8, CV_32S);
+  int largest = 1;
+  for (int i = 2; i < stats.rows; ++i)
+    if (stats.at<int>(i, cv::CC_STAT_AREA) > stats.at<int>(largest, cv::CC_STAT_AREA)) largest = i;
+  const cv::Mat key = labels == largest;
+  std::printf("key: %d px, its largest blob %d px\n", cv::countNonZero(full_key), cv::countNonZero(key));
+  const cv::Mat depth = readDepthExr(dir / "out" / "depth" / "000000.exr");
+  ASSERT_EQ(depth.size(), key.size());
+  const cv::Mat hull_px = (depth == depth) & (depth != std::numeric_limits<float>::infinity());
+  const double in_key = cv::countNonZero(key), covered = cv::countNonZero(key & hull_px),
+               in_hull = cv::countNonZero(hull_px);
+  const double coverage = covered / in_key, iou = covered / (in_key + in_hull - covered);
+  cv::Mat hull_1px;
+  cv::dilate(hull_px, hull_1px, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+  const double coverage_1px = cv::countNonZero(key & hull_1px) / in_key;
+  std::printf("coverage with the hull's footprint grown by 1 px: %.4f\n", coverage_1px);
+  const nlohmann::json& v = report["config"]["volume"];
+  std::printf("{\"stage\": \"carve_real\", \"data\": \"oxford dino\", \"views\": 35, \"left_out\": \"%s\", "
+              "\"volume\": %s, \"voxel\": %g, \"key_px\": %.0f, \"coverage\": %.4f, \"silhouette_iou\": %.4f, "
+              "\"carve_ms\": %.1f, \"total_ms\": %.1f}\n",
+              left_out.c_str(), v.dump().c_str(), report["config"]["voxel_m"].get<double>(), in_key, coverage, iou,
+              r.carve_ms, r.total_ms);
+  // Measured: coverage 0.980, 0.995 with the footprint grown by 1 px, IoU 0.973, in a volume of
+  // 0.25 x 0.25 x 0.34 found on its own (cells of 1.3e-3). What is not covered is a rim of at
+  // most a pixel along the tail and the spikes: the 35 keys' edges (their sub-pixel placement on
+  // a spiky, textured object) and the data's calibration disagree by that much, as on the
+  // temple (98.9-99.6 % strict, above 99.5 % with 1 px).
+  ASSERT_GT(in_key, 20000);  // the dino fills a good part of the 720 x 576 view
+  EXPECT_GE(coverage, 0.975);
+  EXPECT_GE(coverage_1px, 0.99);
+  EXPECT_GE(iou, 0.95);
 }
 
 }  // namespace

@@ -274,6 +274,48 @@ TEST(CarveRun, KeyedPlatesCarveAndACorruptPlateDropsItsCamera) {
   EXPECT_LT(r["depth_pixels"].get<double>(), 1.1 * true_px);
 }
 
+// A stage with no screen, end to end: the synthetic set (painted walls, concrete floor) written
+// with its clean plates (clean/<camera>.png, as a stage hands them over), keyed by difference
+// against them through the take, carved; and the same on the blue stage. The depth is made for
+// witness01: the main camera moves, so it has no clean plate (and no screen on the set).
+TEST(CarveRun, BlueAndNoScreenStagesKeyThroughTheTakeAndCarve) {
+  for (const char* backdrop : {"blue", "set"}) {
+    const fs::path dir = test::scratchDir("carving_run", std::string("backdrop_") + backdrop);
+    synth::SynthOptions so;
+    so.frames = 1;
+    so.witness_cameras = 4;
+    so.witness_width = 320;
+    so.witness_height = 180;
+    so.main_width = 480;
+    so.main_height = 270;
+    so.noise_sigma = 2.0;
+    so.write_meshes = false;
+    so.backdrop = backdrop;
+    so.clean_plates = true;
+    synth::synthesizeTake(so, dir / "take");
+    ASSERT_TRUE(fs::exists(dir / "take" / "clean" / "witness01.png")) << backdrop;
+    EXPECT_FALSE(fs::exists(dir / "take" / "clean" / "main.png")) << "the moving main camera has no clean plate";
+    const Take take({dir / "take", dir / "take" / "truth" / "rig.json", {}, dir / "take" / "truth" / "main_poses.jsonl"});
+    RunOptions o = fastOptions(dir / "out");
+    o.depth_camera = "witness01";  // a static camera with a plate
+    CarveJob job(take, o);
+    const RunSummary s = job.run();
+    ASSERT_TRUE(s.failed.empty()) << backdrop << ": " << s.failed.front().reason;
+    ASSERT_EQ(s.carved.size(), 1u) << backdrop;
+    const nlohmann::json r = readReport(job.reportPath(0));
+    EXPECT_TRUE(r["cameras_dropped"].empty()) << backdrop << ": " << r["cameras_dropped"].dump();
+    // witness01's depth covers about as many pixels as the truth gives the actor and the crate.
+    const cv::Mat labels =
+        cv::imread((dir / "take" / "truth" / "labels" / "witness01" / "000000.png").string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(labels.empty());
+    const double true_px = cv::countNonZero(labels == 2) + cv::countNonZero(labels == 3);
+    const double px = r["depth_pixels"].get<double>();
+    std::printf("%s stage: witness01 depth %0.f px, truth %.0f px\n", backdrop, px, true_px);
+    EXPECT_GT(px, 0.9 * true_px) << backdrop;
+    EXPECT_LT(px, 1.1 * true_px) << backdrop;
+  }
+}
+
 // Modification times of every output of a run.
 std::map<fs::path, fs::file_time_type> outputTimes(const CarveJob& job, const std::vector<int>& frames) {
   std::map<fs::path, fs::file_time_type> times;

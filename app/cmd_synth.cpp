@@ -135,6 +135,9 @@ Runner addSynthCommand(CLI::App& app) {
                   "Rig preset: seed of the board's path (default: --seed)");
   cmd->add_flag("--no-floor", args->no_floor,
                 "Rig preset: every frame waves the board (no floor frames, no floor.json)");
+  cmd->add_flag("--floor-only", args->options.floor_only,
+                "Rig preset: every frame shows the board lying still on the floor, none waved "
+                "(static witnesses placed from the floor board alone)");
   cmd->add_flag("--json", args->json, "Print a JSON summary on stdout");
   cmd->add_flag("--quiet", args->quiet, "No progress line");
 

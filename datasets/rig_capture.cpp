@@ -421,9 +421,10 @@ struct RigCapture::Impl {
     return std::clamp(frame - delay[camera], 0, options.frames - 1);
   }
   bool isFloorFrame(int frame) const {
-    return options.floor_frames && isFloorBoardFrame(frame, options.frames);
+    return options.floor_only || (options.floor_frames && isFloorBoardFrame(frame, options.frames));
   }
   Pose boardPose(int frame) const {
+    if (options.floor_only) return synth::floorBoardPose();
     return options.floor_frames ? rigBoardPose(board, frame, options.frames, options.board_seed)
                                 : rigWavedBoardPose(board, frame, options.frames, options.board_seed);
   }
@@ -442,6 +443,7 @@ RigCapture::RigCapture(const RigCaptureOptions& options) : impl_(std::make_uniqu
     badOption("blur_sigma_px", "must be in [0, 50] (got " + str(o.blur_sigma_px) + ")");
   }
   if (o.threads < 0) badOption("threads", "must be >= 0 (got " + str(o.threads) + ")");
+  if (o.floor_only && !o.floor_frames) badOption("floor_only", "contradicts floor_frames = false");
   if (o.rig.witness_cameras < 1 || o.rig.witness_cameras > 99) {
     badOption("rig.witness_cameras", "must be in [1, 99] (got " + str(o.rig.witness_cameras) + ")");
   }

@@ -46,6 +46,9 @@ struct RigCaptureOptions {
   // Camera name -> linear gain (brightness), default 1.
   std::map<std::string, double> gain;
   bool floor_frames = true;             // false: every frame waves the board (re-survey capture)
+  // true: every frame shows the floor board and nothing is waved (static witnesses placed from
+  // one still board each, for stages where a moving-board take is not possible).
+  bool floor_only = false;
   int threads = 0;                      // OpenMP threads for rendering (0 = default)
 };
 

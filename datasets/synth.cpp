@@ -111,6 +111,7 @@ nlohmann::json optionsToJson(const SynthOptions& o) {
           {"write_meshes", o.write_meshes},
           {"board_seed", o.board_seed.value_or(o.seed)},
           {"floor_frames", o.floor_frames},
+          {"floor_only", o.floor_only},
           {"delay_frames", o.delay_frames},
           {"camera_format", o.camera_format},
           {"sequence_pattern", o.sequence_pattern},
@@ -286,7 +287,9 @@ void SynthOptions::validate() const {
     if (!bump.empty()) badOption("bump", "applies to the rig preset only");
     if (board_seed) badOption("board_seed", "applies to the rig preset only");
     if (!floor_frames) badOption("floor_frames", "applies to the rig preset only");
+    if (floor_only) badOption("floor_only", "applies to the rig preset only");
   }
+  if (floor_only && !floor_frames) badOption("floor_only", "contradicts floor_frames = false (--no-floor)");
   auto known = [&](const std::string& name) {
     if (name == "main") return true;
     for (int i = 0; i < witness_cameras; ++i) {
@@ -389,6 +392,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
     ro.delay_frames = o.delay_frames;
     ro.bump = o.bump;
     ro.floor_frames = o.floor_frames;
+    ro.floor_only = o.floor_only;
     ro.threads = o.threads;
     for (const TakeCamera& c : cameras) ro.gain[c.rig.camera.name] = c.gain;
     capture = std::make_unique<RigCapture>(ro);

@@ -57,6 +57,7 @@ struct SynthOptions {
   // preset for delay_frames (an unsynchronised camera: its stream's take frame f shows f - delay):
   std::optional<std::uint64_t> board_seed;  // board trajectory; default: seed
   bool floor_frames = true;                 // false: every frame waves the board (no floor.json)
+  bool floor_only = false;                  // true: every frame shows the floor board, none waved
   std::map<std::string, int> delay_frames;  // camera -> frames late (its frame f shows f - delay)
   std::map<std::string, Pose> bump;         // camera -> true pose T_world_cam * bump
 

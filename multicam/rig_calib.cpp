@@ -231,16 +231,25 @@ std::vector<Edge> cameraEdges(const ViewsByCamera& views) {
 }
 
 // Every camera must have a view whose pose a PnP found; the error names all that have none.
-void requireViews(const ViewsByCamera& views, const std::vector<Camera>& cameras, int min_points) {
+// In a take whose every frame shows the floor board (static witnesses) that means the camera
+// does not see the floor board, and the message says so.
+void requireViews(const RigObservations& obs, const ViewsByCamera& views, const std::vector<Camera>& cameras,
+                  int min_points) {
   std::vector<std::string> none;
   for (size_t c = 0; c < cameras.size(); ++c) {
     const bool posed = std::any_of(views[c].begin(), views[c].end(), [](const auto& kv) { return kv.second.posed; });
     if (!posed) none.push_back(cameras[c].name);
   }
   if (none.empty()) return;
-  failCamera("rig calibrate: camera " + joinNames(none) + " has no usable board view (a frame with >= " +
-                 std::to_string(min_points) + " board points that one pose explains)",
-             none.front());
+  bool floor_only = obs.has_floor;
+  for (const CameraDetections& d : obs.cameras)
+    for (const auto& [frame, points] : d.frames) floor_only = floor_only && obs.isFloorFrame(frame);
+  const std::string what = floor_only ? " does not see the floor board (every frame of the take is a floor frame; "
+                                        "it needs >= " + std::to_string(min_points) +
+                                            " board points that one pose explains): move the board or the camera"
+                                      : " has no usable board view (a frame with >= " + std::to_string(min_points) +
+                                            " board points that one pose explains)";
+  failCamera("rig calibrate: camera " + joinNames(none) + what, none.front());
 }
 
 // Camera poses in the reference camera's frame (T_ref_cam) from the camera graph: the cameras
@@ -489,7 +498,7 @@ RigCalibResult calibrateRig(const RigObservations& obs, const Rig& initial,
 
   // ---- initialisation: views, camera graph, world frame, board poses
   const ViewsByCamera views = detail::collectViews(obs, initial, options.min_points, options.threads);
-  requireViews(views, cameras, options.min_points);
+  requireViews(obs, views, cameras, options.min_points);
   RigCalibResult result;
   const std::vector<Pose> T_ref_cam = placeCameras(views, cameras, ref, result.spanning_tree);
   const std::map<int, std::vector<const View*>> frames = viewsByFrame(views);

@@ -77,6 +77,10 @@ struct RigCalibResult {
 // captures). Covariances: Gauss–Newton normal equations of the kept (weighted) points with the
 // boards marginalised, scaled by the noise estimate sigma_px^2; they hold given the intrinsics
 // that were not solved.
+// A take whose every frame is a floor frame (static witnesses, no board waved: one still frame
+// or a few) goes the same way: each camera's robust PnP on the floor board, the graph through
+// the board they all see, the bundle with the floor board fixed (tests/multicam/rig_calib_test.cpp
+// FloorOnly*); a camera that does not see the board is named ("does not see the floor board").
 // Throws Error naming the camera when a camera has no usable view, or shares no board view
 // (directly or through others) with the rest; naming the field 'floor' when obs has floor frames
 // but no camera sees the floor board in them; and naming the camera and the field when

@@ -346,6 +346,25 @@ TEST(RigCapture, FloorFramesComeLastUnlessTurnedOff) {
   EXPECT_GT(waving.T_world_board(0, o.frames - 1).translation().z(), 0.3);
 }
 
+TEST(RigCapture, FloorOnlyShowsTheStillFloorBoardInEveryFrame) {
+  RigCaptureOptions o = smallOptions();
+  o.frames = 2;
+  o.floor_only = true;
+  const RigCapture still(o);
+  for (int f = 0; f < o.frames; ++f) {
+    EXPECT_TRUE(still.isFloorFrame(f));
+    EXPECT_TRUE(still.showsFloorBoard(0, f));
+    EXPECT_TRUE(still.T_world_board(0, f).isApprox(floorBoardPose(), 0));
+  }
+  o.floor_frames = false;
+  try {
+    const RigCapture contradiction(o);
+    ADD_FAILURE() << "floor_only with floor_frames = false accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().field, "floor_only") << e.what();
+  }
+}
+
 TEST(RigCapture, BadOptionsNameTheCameraOrField) {
   auto errorOf = [](const RigCaptureOptions& o) -> ErrorContext {
     try {

@@ -42,6 +42,7 @@ struct ProjectedCaptureOptions {
   double noise_px = 0.2;              // per pixel coordinate
   double outlier_fraction = 0;        // detections replaced by a random pixel in the image
   bool floor = true;                  // the last floorBoardFrameCount(frames) frames
+  bool floor_only = false;            // every frame shows the floor board (static witnesses)
   std::map<std::string, Pose> bump;   // camera -> T_world_cam' = T_world_cam * bump
 };
 
@@ -61,7 +62,7 @@ inline ProjectedCapture projectedCapture(const ProjectedCaptureOptions& o) {
   RigObservations& obs = out.obs;
   obs.board = board;
   obs.frame_count = o.frames;
-  obs.has_floor = o.floor;
+  obs.has_floor = o.floor || o.floor_only;
   obs.floor.board = board;
   obs.floor.T_world_board = synth::floorBoardPose();
   synth::StudioConfig config;
@@ -77,10 +78,11 @@ inline ProjectedCapture projectedCapture(const ProjectedCaptureOptions& o) {
     obs.cameras.push_back(d);
   }
   for (int f = 0; f < o.frames; ++f) {
-    const bool floor = o.floor && synth::isFloorBoardFrame(f, o.frames);
+    const bool floor = o.floor_only || (o.floor && synth::isFloorBoardFrame(f, o.frames));
     if (floor) obs.floor.frames.push_back(f);
-    const Pose T_world_board = o.floor ? synth::rigBoardPose(board, f, o.frames, o.board_seed)
-                                       : synth::rigWavedBoardPose(board, f, o.frames, o.board_seed);
+    const Pose T_world_board = floor     ? synth::floorBoardPose()
+                               : o.floor ? synth::rigBoardPose(board, f, o.frames, o.board_seed)
+                                         : synth::rigWavedBoardPose(board, f, o.frames, o.board_seed);
     synth::Scene scene = stage;
     auto printed = synth::makeBoard(board, T_world_board);
     scene.add(floor ? synth::onTopOf(printed) : printed);

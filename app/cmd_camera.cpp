@@ -14,6 +14,8 @@
 #include "core/error.h"
 #include "core/rig.h"
 #include "core/rig_import.h"
+#include "core/rig_world.h"
+#include "multicam/floor_world.h"
 #include "take/take.h"
 
 namespace previz::app {
@@ -23,7 +25,7 @@ namespace fs = std::filesystem;
 
 struct CameraArgs {
   // import
-  std::string krt, projection, kalibr, colmap, size, take, out, units = "m", flip = "none";
+  std::string krt, projection, kalibr, colmap, size, take, out, units = "m", flip = "none", world;
   std::vector<std::string> opencv, names;
   // export / stmap / info
   std::string rig, opencv_dir, krt_out, projection_out, kalibr_out, colmap_out, camera, stmap_dir;
@@ -64,6 +66,16 @@ int runImport(const CameraArgs& a) {
     if (a.size.empty() && a.take.empty())
       throw Error("K R t and P rows carry no image size: give --size WxH or --take DIR", fieldContext("--size"));
     imported = !a.krt.empty() ? importKRtRows(a.krt, opt) : importProjectionRows(a.projection, opt);
+  }
+  // --world: the rig moved into previz's world from points known in both frames, or from the
+  // floor board a take shows (core/rig_world.h, multicam/floor_world.h).
+  if (!a.world.empty()) {
+    const size_t colon = a.world.find(':');
+    const std::string kind = a.world.substr(0, colon), where = colon == std::string::npos ? "" : a.world.substr(colon + 1);
+    if (where.empty() || (kind != "points" && kind != "floor"))
+      throw Error("give points:FILE.json or floor:TAKE_DIR (got '" + a.world + "')", fieldContext("--world"));
+    if (kind == "points") placeImportByPoints(imported, readWorldPoints(where), opt);
+    else multicam::placeImportOnFloor(imported, where, opt);
   }
   writeRig(imported.rig, a.out);
   std::cerr << imported.report.fullReport();
@@ -190,6 +202,10 @@ Runner addCameraCommand(CLI::App& app) {
                   "(x,y,z)->(x,-y,-z), y-down (x,y,z)->(x,z,-y), none")
       ->check(CLI::IsMember({"none", "y-up", "z-down", "y-down"}))
       ->capture_default_str();
+  imp->add_option("--world", a->world,
+                  "Place the rig in previz's world (z up, floor z = 0): points:FILE.json (3+ points with "
+                  "\"world\" metres and \"rig\" in the file's frame and --units; docs/formats.md) or "
+                  "floor:TAKE_DIR (the floor board of TAKE_DIR/floor.json seen by the imported cameras)");
   imp->add_option("--out", a->out, "rig.json to write")->required();
   imp->add_flag("--json", a->json, "JSON summary (with the import report) on stdout");
 

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Static witnesses from the floor board, as a user meets them (issue 30): a take of two still
-# frames of the board lying on the floor (synth --floor-only) calibrated with known intrinsics
-# against its truth; a camera turned away from the board named.
+# Static witnesses and imported rigs placed on the floor board, as a user meets them (issue 30):
+# a take of two still frames of the board lying on the floor (synth --floor-only) calibrated
+# with known intrinsics against its truth; a camera turned away from the board named; another
+# tool's rig, moved to an arbitrary frame, brought back to previz's world by `camera import
+# --world` from surveyed points (exact) and from the floor board of the take (a few mm).
 #   floor_cli_test.sh PREVIZ_BIN SHARED_DATA TMPDIR
 set -uo pipefail
 bin="$1"; data="$2"; tmp="$3"
@@ -10,6 +12,19 @@ source "$(dirname "${BASH_SOURCE[0]}")/../cli/checks.sh"
 
 json_num() { grep -o "\"$1\":[-0-9.e+]*" <<<"$2" | head -n 1 | cut -d: -f2; }
 below() { awk -v v="$1" -v l="$2" 'BEGIN { exit !(v != "" && v + 0 == v && v < l) }'; }
+# Camera centres of a rig, one "name x y z" line each, in rig order.
+centres() {
+  "$bin" camera info --rig "$1" --json 2>/dev/null | grep -o '"centre_m":\[[^]]*\],"invertible_radius":[^,]*,"name":"[^"]*"' \
+    | sed -E 's/"centre_m":\[([^]]*)\].*"name":"([^"]*)"/\2 \1/; s/,/ /g'
+}
+# Largest distance between the centres of two rigs (cameras matched by name).
+max_centre_distance() {
+  paste -d' ' <(centres "$1" | sort) <(centres "$2" | sort) | awk '{
+    if ($1 != $5) { print "names differ: " $1 " " $5; exit 1 }
+    d = sqrt(($2-$6)^2 + ($3-$7)^2 + ($4-$8)^2); if (d > m) m = d; n++ }
+    END { if (n == 0) exit 1; printf "%.9f\n", m }'
+}
+
 # The rig preset with 4 witnesses + main, ChArUco, two still frames of the floor board. At
 # 1280x720 the board lying 3-6 m away at grazing angles is found with 8-12 corners by most
 # witnesses (too few to place a camera by the board alone); at
@@ -56,6 +71,57 @@ if synth_floor "$tmp/away" --bump witness03=0,0,0,90,0,0; then
   [ ! -e "$tmp/away_cal/rig.json" ] && ok "no rig.json written" || fail "a failed calibration wrote rig.json"
 else
   fail "synth take with witness03 turned away: $(tail -n 3 "$tmp/away.log")"
+fi
+
+# 3. Another tool's rig in its own frame: the truth moved by a quarter turn about z and a shift
+#    (made with --world points itself: "rig" = previz's coordinates, "world" = the other frame's).
+cat > "$tmp/to_other.json" <<'JSON'
+{"points": [
+  {"name": "a", "rig": [0, 0, 0], "world": [5, -2, 1]},
+  {"name": "b", "rig": [1, 0, 0], "world": [5, -1, 1]},
+  {"name": "c", "rig": [0, 1, 0], "world": [4, -2, 1]},
+  {"name": "d", "rig": [0, 0, 1], "world": [5, -2, 2]}]}
+JSON
+cat > "$tmp/from_other.json" <<'JSON'
+{"points": [
+  {"name": "a", "world": [0, 0, 0], "rig": [5, -2, 1]},
+  {"name": "b", "world": [1, 0, 0], "rig": [5, -1, 1]},
+  {"name": "c", "world": [0, 1, 0], "rig": [4, -2, 1]},
+  {"name": "d", "world": [0, 0, 1], "rig": [5, -2, 2]}]}
+JSON
+"$bin" camera export --rig "$take/truth/rig.json" --opencv-dir "$tmp/truth_yaml" >/dev/null 2>&1
+yamls=("$tmp"/truth_yaml/*.yaml)
+if "$bin" camera import --opencv "${yamls[@]}" --world "points:$tmp/to_other.json" --out "$tmp/other.json" >/dev/null 2>&1 \
+   && "$bin" camera export --rig "$tmp/other.json" --opencv-dir "$tmp/other_yaml" >/dev/null 2>&1; then
+  d=$(max_centre_distance "$take/truth/rig.json" "$tmp/other.json")
+  below 1 "$d" && ok "the other tool's frame is elsewhere (${d} m)" || fail "rig did not move: $d"
+  others=("$tmp"/other_yaml/*.yaml)
+  if "$bin" camera import --opencv "${others[@]}" --world "points:$tmp/from_other.json" --out "$tmp/back_points.json" \
+       --json >"$tmp/back_points.out" 2>"$tmp/back_points.err"; then
+    d=$(max_centre_distance "$take/truth/rig.json" "$tmp/back_points.json")
+    echo "   --world points: worst centre ${d} m"
+    below "$d" 1e-6 && ok "--world points brings every camera back within 1e-6 m" || fail "--world points: $d m"
+    grep -q "rigid motion fitted" "$tmp/back_points.err" && ok "the import report says what was fitted" \
+      || fail "report: $(cat "$tmp/back_points.err")"
+  else fail "camera import --world points: $(tail -n 3 "$tmp/back_points.err")"; fi
+  if "$bin" camera import --opencv "${others[@]}" --world "floor:$take" --out "$tmp/back_floor.json" \
+       2>"$tmp/back_floor.err" >/dev/null; then
+    d=$(max_centre_distance "$take/truth/rig.json" "$tmp/back_floor.json")
+    echo "   --world floor: worst centre ${d} m"
+    # The board's pose from the 5 cameras held, 3-6 m away: measured 0.7 mm at worst.
+    below "$d" 0.005 && ok "--world floor brings every camera back within 5 mm ($d m)" || fail "--world floor: $d m"
+    grep -q "the floor board of" "$tmp/back_floor.err" && ok "the import report names the floor board" \
+      || fail "report: $(cat "$tmp/back_floor.err")"
+  else fail "camera import --world floor: $(tail -n 3 "$tmp/back_floor.err")"; fi
+  expect_fail "--world with an unknown kind names the flag" "--world" \
+    "$bin" camera import --opencv "${others[@]}" --world "survey:$tmp/from_other.json" --out "$tmp/x.json"
+  expect_fail "--world points with --flip names the flag" "flip" \
+    "$bin" camera import --opencv "${others[@]}" --flip y-up --world "points:$tmp/from_other.json" --out "$tmp/x.json"
+  expect_fail "--world floor on a take without floor.json names it" "floor" \
+    "$bin" camera import --opencv "${others[@]}" --world "floor:$tmp/truth_yaml" --out "$tmp/x.json"
+  [ ! -e "$tmp/x.json" ] && ok "no rig written by failed imports" || fail "a failed import wrote x.json"
+else
+  fail "moving the truth to another frame failed"
 fi
 
 leftovers=$(find "$tmp" -name '*.tmp*' | head -n 3)

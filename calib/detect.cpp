@@ -35,6 +35,8 @@ void DetectOptions::validate() const {
   if (!(std::isfinite(border_margin_px) && border_margin_px >= 0))
     optionError("border_margin_px",
                 "must be a finite number >= 0 (got " + std::to_string(border_margin_px) + ")");
+  if (!(std::isfinite(min_square_px) && min_square_px >= 0))
+    optionError("min_square_px", "must be a finite number >= 0 (got " + std::to_string(min_square_px) + ")");
   if (!(std::isfinite(min_marker_px) && min_marker_px >= 4))
     optionError("min_marker_px",
                 "must be a finite number >= 4 (got " + std::to_string(min_marker_px) + ")");

@@ -16,6 +16,10 @@ struct DetectOptions {
   int subpixel_window_px = 5;      // half window; points nearer the border than it are dropped
   double border_margin_px = 3.0;   // extra margin: points/markers this close to the border dropped
   double min_marker_px = 12.0;     // markers/tags/circles smaller than this (edge, px) skipped
+  // Chessboard squares smaller than this (px) skipped; 0 = none: a corner is refined in the
+  // window its neighbours leave, and one too small for any keeps the detector's own position
+  // (a small, far, slanted floor board; detect_test SmallSlantedBoards).
+  double min_square_px = 0.0;
   int min_points = 6;              // fewer points than this = not found
   // 8-bit input is sRGB-encoded (as the studio renderer and most video cameras write it):
   // corners and circle edges are refined on the decoded, linear image. On the sRGB values

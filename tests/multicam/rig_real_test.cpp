@@ -23,6 +23,7 @@
 #include "calib/intrinsics.h"
 #include "core/board.h"
 #include "core/io.h"
+#include "core/rig_import.h"
 #include "multicam/rig_calib.h"
 #include "tests/real_data.h"
 
@@ -143,6 +144,33 @@ TEST(RigCalibReal, StereoPairAgreesWithOpenCvStereoCalibrate) {
   EXPECT_LE(dt, 0.5 * right.sigma_position_m);
   EXPECT_LE(dR_deg, 0.5 * right.sigma_rotation_deg);
   EXPECT_LE(ours.rms_px, cv_rms + 0.001);
+
+  // OpenCV's answer as its stereo_calib sample writes it (intrinsics.yml: M1 D1 M2 D2;
+  // extrinsics.yml: R T), imported as another tool's rig: the same two-camera rig as our solve.
+  const fs::path dir = fs::path(PREVIZ_TEST_TMP) / "rig_real_stereo";
+  fs::create_directories(dir);
+  {
+    cv::FileStorage intr((dir / "intrinsics.yml").string(), cv::FileStorage::WRITE);
+    intr << "M1" << K1 << "D1" << D1 << "M2" << K2 << "D2" << D2;
+    cv::FileStorage extr((dir / "extrinsics.yml").string(), cv::FileStorage::WRITE);
+    extr << "R" << R << "T" << T;
+  }
+  ImportOptions io;
+  io.width = cl.width;
+  io.height = cl.height;
+  const RigImport imported = importOpenCv({dir / "intrinsics.yml", dir / "extrinsics.yml"}, io);
+  ASSERT_EQ(imported.rig.cameras.size(), 2u);
+  const Pose imported_left_right =
+      imported.rig.cameras[0].T_world_cam.inverse() * imported.rig.cameras[1].T_world_cam;
+  const double dt_import = (T_left_right.translation() - imported_left_right.translation()).norm();
+  const double dR_import = Eigen::AngleAxisd(T_left_right.linear().transpose() * imported_left_right.linear()).angle() *
+                           180.0 / M_PI;
+  std::printf("  OpenCV's files imported: centre %.4f squares from ours, rotation %.4f deg; fx %.3f / %.3f\n",
+              dt_import, dR_import, imported.rig.cameras[1].camera.fx, cr.fx);
+  EXPECT_LE(dt_import, 0.5 * right.sigma_position_m);
+  EXPECT_LE(dR_import, 0.5 * right.sigma_rotation_deg);
+  EXPECT_NEAR(imported.rig.cameras[1].camera.fx, cr.fx, 1e-9 * cr.fx);
+  EXPECT_NEAR(imported.rig.cameras[1].camera.dist.k1, cr.dist.k1, 1e-12);
 }
 
 }  // namespace

@@ -479,21 +479,26 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   }
 
   double render_ms = 0, plate_ms = 0;
+  // How camera c films frame f: the take's sampling, its gain, lens blur and sensor noise.
+  auto plateOptions = [&](const TakeCamera& c, int f) {
+    RenderOptions ro;
+    ro.samples_per_pixel = o.samples_per_pixel;
+    ro.gain = c.gain;
+    ro.blur_sigma_px = o.blur_sigma_px;
+    ro.noise_sigma = o.noise_sigma;
+    ro.seed = o.seed;
+    ro.camera_index = c.index;
+    ro.frame = f;
+    ro.threads = o.threads;
+    return ro;
+  };
   // Clean plates: the empty stage from every static camera (a moving main camera has none), with
   // the camera's own gain and noise (a noise stream of their own: frame -1).
   if (studio_preset && (o.clean_plates || config.backdrop == Backdrop::kSet)) {
     const Scene empty = studio.sceneAt(0.0, kLayerStage);
     for (const TakeCamera& c : cameras) {
       if (c.moving) continue;
-      RenderOptions ro;
-      ro.samples_per_pixel = o.samples_per_pixel;
-      ro.gain = c.gain;
-      ro.blur_sigma_px = o.blur_sigma_px;
-      ro.noise_sigma = o.noise_sigma;
-      ro.seed = o.seed;
-      ro.camera_index = c.index;
-      ro.frame = -1;
-      ro.threads = o.threads;
+      RenderOptions ro = plateOptions(c, -1);
       ro.truth = false;
       const Clock::time_point start = Clock::now();
       const RenderedView view = renderView(c.rig.camera, c.rig.T_world_cam, empty, ro);
@@ -562,16 +567,8 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       const std::string& name = c.rig.camera.name;
       const int delay = perCamera(o.delay_frames, name);
       if (f < perCamera(o.late_frames, name)) continue;  // not recording yet
-      RenderOptions ro;
+      RenderOptions ro = plateOptions(c, f);
       ro.keep_encoded = keep_encoded;
-      ro.samples_per_pixel = o.samples_per_pixel;
-      ro.gain = c.gain;
-      ro.blur_sigma_px = o.blur_sigma_px;
-      ro.noise_sigma = o.noise_sigma;
-      ro.seed = o.seed;
-      ro.camera_index = c.index;
-      ro.frame = f;
-      ro.threads = o.threads;
       const Clock::time_point start = Clock::now();
       RenderedView view;
       if (delay == 0) {

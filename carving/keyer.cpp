@@ -232,10 +232,6 @@ GarbageModel estimateGarbage(const cv::Mat& bgr8, const ClassifyTables& tables) 
     std::nth_element(v.begin(), v.begin() + k, v.end());
     return v[k];
   };
-  // The first colour from every off-screen sample; a further one from the samples the colours
-  // before it leave, only when it holds a twentieth of the border: a second surface around the
-  // screen (the dino's wall: 7 %), not the actor crossing the border (whose colours are many
-  // and each small).
   // Near-black samples (black drapes, a dark band at the frame's edge) have no chroma to speak
   // of: one mode of any chroma up to their brightness, when they hold a tenth of the border.
   constexpr float kBlack = 0.03f;  // linear R + G + B: codes below ~30 each
@@ -255,6 +251,10 @@ GarbageModel estimateGarbage(const cv::Mat& bgr8, const ClassifyTables& tables) 
   } else {
     left_r = rs, left_b = bs, left_s = sums;  // too few to be a surface of their own
   }
+  // The first colour from the other off-screen samples; a further one from the samples the colours
+  // before it leave, only when it holds a twentieth of the border: a second surface around the
+  // screen (the dino's wall: 7 %), not the actor crossing the border (whose colours are many
+  // and each small).
   for (int m = model.count; m < 3 && left_r.size() >= 16; ++m) {
     GarbageMode mode;
     mode.r = quantile(left_r, 0.5);

@@ -271,13 +271,19 @@ struct CarveJob::Impl {
     return in;
   }
 
-  // The hull from the carving cameras (the first carve_names.size() inputs).
-  VisualHull carve(int frame, const FrameInputs& in) {
+  // The carving cameras' silhouettes (the first carve_names.size() inputs), dropped ones empty.
+  Silhouettes carving(const FrameInputs& in) const {
     Silhouettes sil;
     for (size_t j = 0; j < carve_names.size(); ++j) {
       sil.masks.push_back(in.dropped[j].empty() ? in.silhouettes[j] : cv::Mat());
       sil.dropped.push_back(in.dropped[j]);
     }
+    return sil;
+  }
+
+  // The hull from the carving cameras (the first carve_names.size() inputs).
+  VisualHull carve(int frame, const FrameInputs& in) {
+    const Silhouettes sil = carving(in);
     try {
       return carver->carve(sil);
     } catch (const Error& e) {
@@ -475,11 +481,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
       }
     if (first < 0) throw Error("carve: no frame selected to find the volume from", fieldContext("frames"));
     const FrameInputs in = m.readSilhouettes(first);
-    Silhouettes sil;
-    for (size_t j = 0; j < m.carve_names.size(); ++j) {
-      sil.masks.push_back(in.dropped[j].empty() ? in.silhouettes[j] : cv::Mat());
-      sil.dropped.push_back(in.dropped[j]);
-    }
+    const Silhouettes sil = m.carving(in);
     FoundVolume found;
     try {
       found = volumeFromSilhouettes(cameras, sil, m.options.hull);

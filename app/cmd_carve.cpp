@@ -22,6 +22,7 @@ struct CarveArgs {
   int voxel_cells = 0;
   double voxel_m = 0.005;
   int k = 0;
+  double carve_threshold = 0.5;
   int min_views = 2;
   int threads = 0;
   double point_spacing_m = 0;
@@ -47,6 +48,7 @@ int runCarve(const CarveArgs& a) {
   o.shard = carving::parseShard(a.shard);
   o.hull.voxel_m = a.voxel_m;
   o.hull.k = a.k;
+  o.carve_threshold = a.carve_threshold;
   o.hull.min_views = a.min_views;
   o.hull.threads = a.threads;
   if (a.volume == "auto") {
@@ -137,6 +139,10 @@ Runner addCarveCommand(CLI::App& app) {
   cmd->add_option("--shard", a->shard, "Shard i/n: every n-th selected frame from the i-th")
       ->capture_default_str();
   cmd->add_option("--k", a->k, "A cell survives outside the silhouette of at most k cameras")
+      ->capture_default_str();
+  cmd->add_option("--carve-threshold", a->carve_threshold,
+                  "Alpha at which a carving camera's key counts a pixel inside (below 0.5: partly covered edge "
+                  "pixels too, a hull that stays around the object when many views intersect)")
       ->capture_default_str();
   cmd->add_option("--voxel", a->voxel_m, "Finest cell edge, metres")->capture_default_str();
   cmd->add_option("--volume", a->volume,

@@ -156,6 +156,9 @@ void RunOptions::validate() const {
                 fieldContext("shard"));
   if (frames.first < 0 || (frames.end >= 0 && frames.end <= frames.first))
     throw Error("carve: frame range must have 0 <= first < end", fieldContext("frames"));
+  if (!(carve_threshold > 0 && carve_threshold < 1))
+    throw Error("carve: carve_threshold must be in (0, 1) (got " + std::to_string(carve_threshold) + ")",
+                fieldContext("carve_threshold"));
   if (voxel_cells < 0 || voxel_cells > 4096)
     throw Error("carve: voxel_cells must be in [0, 4096] (got " + std::to_string(voxel_cells) + ")",
                 fieldContext("voxel_cells"));
@@ -459,7 +462,9 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
   if (!take.hasMasks()) {
     for (size_t i = 0; i < m.input_names.size(); ++i) {
       const std::string& name = m.input_names[i];
-      m.keyers.emplace_back(m.options.keyer);
+      KeyerOptions keyer = m.options.keyer;
+      if (i < m.carve_names.size()) keyer.silhouette_threshold = m.options.carve_threshold;
+      m.keyers.emplace_back(keyer);
       try {
         const cv::Mat clean = take.cleanPlate(name);
         if (!clean.empty()) m.keyers.back().setCleanPlate(clean, "clean plate of " + name);
@@ -501,6 +506,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
   m.config = {{"voxel_m", h.voxel_m},
               {"k", h.k},
               {"min_views", h.min_views},
+              {"carve_threshold", m.options.carve_threshold},
               {"volume", {h.volume.min().x(), h.volume.min().y(), h.volume.min().z(),
                           h.volume.max().x(), h.volume.max().y(), h.volume.max().z()}},
               {"volume_from", volume_from},

@@ -60,6 +60,13 @@ struct RunOptions {
   int voxel_cells = 0;
   // Cameras that carve: empty = every camera with role "witness".
   std::vector<std::string> carve_cameras;
+  // The carving cameras' keys: a pixel is inside where its alpha is at or above this (the
+  // keyer's silhouette_threshold, for them only; the depth cameras keep keyer's). A hull is the
+  // intersection of every view's silhouette, so each view's edge error at 0.5 (a pixel half
+  // covered, placed by noise and calibration to a fraction of a pixel) erodes it once more; below
+  // 0.5 the partly covered edge pixels stay in and the hull stays around the object (the Oxford
+  // dino's 35 views: 98.0 % of a left-out view covered at 0.5, 99.2 % at 0.25, the IoU unchanged).
+  double carve_threshold = 0.5;
   // true: depth only inside the depth camera's silhouette (its key or mask); false: wherever
   // the pixel's ray meets the hull (e.g. a camera left out of the carve, to check the hull).
   bool depth_inside_silhouette = true;

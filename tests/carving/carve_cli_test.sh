@@ -29,6 +29,7 @@ expect_fail "bad --volume names the flag" "--volume" "$bin" carve "${common[@]}"
 expect_fail "missing masks folder names the flag" "--masks" "$bin" carve "${common[@]}" --masks "$tmp/nomasks" --out "$tmp/o"
 expect_fail "unknown carving camera is named" "nosuchcam" "$bin" carve "${common[@]}" --cameras witness01,nosuchcam --out "$tmp/o"
 expect_fail "voxel 0 names the field" "voxel" "$bin" carve "${common[@]}" --voxel 0 --out "$tmp/o"
+expect_fail "carve threshold 1 names the field" "carve_threshold" "$bin" carve "${common[@]}" --carve-threshold 1 --out "$tmp/o"
 
 # A good run with the true masks: every documented file per frame, report lines naming cameras.
 out="$tmp/out"

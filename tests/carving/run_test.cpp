@@ -556,6 +556,9 @@ TEST(CarveRun, OxfordDinoKeyedOnItsBlueBackdropCoversTheLeftOutView) {
   o.out = dir / "out";
   o.volume_from_silhouettes = true;
   o.voxel_cells = 256;
+  // Conservative carving keys: a pixel a quarter covered counts (at 0.5, each of the 35 views'
+  // edge errors erodes the hull once more: 98.0 % covered, the same IoU).
+  o.carve_threshold = 0.25;
   for (const RigCamera& rc : take.rig().cameras)
     if (rc.camera.name != left_out) o.carve_cameras.push_back(rc.camera.name);
   ASSERT_EQ(o.carve_cameras.size(), 35u);
@@ -575,9 +578,11 @@ TEST(CarveRun, OxfordDinoKeyedOnItsBlueBackdropCoversTheLeftOutView) {
   ASSERT_TRUE(view.ok()) << view.dropped;
   const cv::Mat full_key = keyer.key(view.image, left_out).silhouette;
   EXPECT_EQ(keyer.screen().backdrop, Backdrop::kBlue);
-  // The object is the key's largest blob: the key also keeps a 1-2 px column at the seam of the
-  // wall and the black band on the right (a mix of two background colours, neither's), which no
-  // other view sees where the dino is.
+  // The object is the key's largest blob: the key also keeps a 3 px column (x 693-695, every row)
+  // where the wall meets the black band on the right: a neutral grey edge of the set (sRGB about
+  // 100,104,111 then 27,29,32) that is neither the blue wall, nor black, nor a mix of the two (in
+  // linear light 0.096 from the wall-black line, whose rim tolerance is 0.049). It is really there,
+  // so the keyer keeps it; no other view sees it where the dino is.
   cv::Mat labels, stats, centroids;
   cv::connectedComponentsWithStats(full_key, labels, stats, centroids, 8, CV_32S);
   int largest = 1;
@@ -601,13 +606,14 @@ TEST(CarveRun, OxfordDinoKeyedOnItsBlueBackdropCoversTheLeftOutView) {
               "\"carve_ms\": %.1f, \"total_ms\": %.1f}\n",
               left_out.c_str(), v.dump().c_str(), report["config"]["voxel_m"].get<double>(), in_key, coverage, iou,
               r.carve_ms, r.total_ms);
-  // Measured: coverage 0.980, 0.995 with the footprint grown by 1 px, IoU 0.973, in a volume of
-  // 0.25 x 0.25 x 0.34 found on its own (cells of 1.3e-3). What is not covered is a rim of at
-  // most a pixel along the tail and the spikes: the 35 keys' edges (their sub-pixel placement on
-  // a spiky, textured object) and the data's calibration disagree by that much, as on the
-  // temple (98.9-99.6 % strict, above 99.5 % with 1 px).
+  // Measured: coverage 0.9917, 0.9966 with the footprint grown by 1 px, IoU 0.973, in a volume
+  // of 0.25 x 0.25 x 0.34 found on its own (cells of 1.3e-3). With the keys cut at alpha 0.5:
+  // coverage 0.980 (0.995 within 1 px), IoU 0.973; 0.35: 0.989, IoU 0.975; 0.1: 0.995, IoU 0.965.
+  // What 0.5 leaves uncovered is a rim of at most a pixel along the tail and the spikes: each
+  // view's half-covered edge pixels, placed to a fraction of a pixel by noise and the data's
+  // calibration, and the hull is the intersection of all 35 (k = 1 instead: 0.986 at 0.5).
   ASSERT_GT(in_key, 20000);  // the dino fills a good part of the 720 x 576 view
-  EXPECT_GE(coverage, 0.975);
+  EXPECT_GE(coverage, 0.99);
   EXPECT_GE(coverage_1px, 0.99);
   EXPECT_GE(iou, 0.95);
 }

@@ -26,6 +26,9 @@ constexpr std::uint8_t kFg = 3;       // clearly foreground
 // Looks like the garbage colour but not connected to the border: foreground (tag ink, a dark
 // neutral costume part surrounded by screen). Turned into kGarbage by the flood when reached.
 constexpr std::uint8_t kGarbageLike = 4;
+// Difference keying, first pass only: the plate darkened within one pixel's noise, a shadow if
+// its neighbourhood agrees (shadowNeighbourhood turns it into kScreen or kUnknown).
+constexpr std::uint8_t kShadowCandidate = 5;
 
 // True where every byte of the 8 at p is background (<= kGarbage).
 bool allBackground8(const std::uint8_t* p) {
@@ -541,6 +544,7 @@ struct DifferenceFrame {
   int tolerance = 0;                          // levels: equal to the plate within noise
   float sigma_frame = 0, sigma_plate = 0;     // estimated sensor noise, grey levels
   float min_shadow = 0.4f;
+  float hue_levels = 2;                       // a shadow's mean residual allowed beyond noise
 };
 
 DifferenceFrame differenceFrame(const cv::Mat& bgr8, const ScreenModel& sm, const KeyerOptions& o) {
@@ -575,20 +579,24 @@ DifferenceFrame differenceFrame(const cv::Mat& bgr8, const ScreenModel& sm, cons
   d.sigma_frame = sigma_frame;
   d.sigma_plate = sm.plate_noise;
   d.min_shadow = static_cast<float>(o.min_shadow);
+  d.hue_levels = static_cast<float>(o.shadow_hue_levels);
   return d;
 }
 
-// Pass 1 of difference keying over rows [y0, y1): kScreen (background: the plate, or its
-// shadow), kFg, kUnknown. Returns the pixels taken for shadows.
-int differenceRows(const cv::Mat& bgr8, const cv::Mat& plate, const DifferenceFrame& d, int y0, int y1,
-                   cv::Mat& cls) {
+// Pass 1 of difference keying over rows [y0, y1): kScreen (the plate), kShadowCandidate (the
+// plate darkened, to one pixel's noise), kFg, kUnknown. A candidate's residual to the darkened
+// plate (frame - s plate, sRGB levels per channel, within one pixel's noise so a few levels) and
+// a 1 go to 'residual' (CV_8SC4; 0 elsewhere).
+void differenceRows(const cv::Mat& bgr8, const cv::Mat& plate, const DifferenceFrame& d, int y0, int y1,
+                    cv::Mat& cls, cv::Mat& residual) {
   const auto& lut = srgb8ToLinear();
   const int W = bgr8.cols, tol = d.tolerance;
-  int shadows = 0;
   for (int y = y0; y < y1; ++y) {
     const std::uint8_t* f = bgr8.ptr<std::uint8_t>(y);
     const std::uint8_t* p = plate.ptr<std::uint8_t>(y);
     std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+    std::int8_t* res = residual.ptr<std::int8_t>(y);
+    std::memset(res, 0, 4 * static_cast<size_t>(W));
     for (int x = 0; x < W; ++x) {
       const std::uint8_t* fx = f + 3 * x;
       const std::uint8_t* px = p + 3 * x;
@@ -606,17 +614,64 @@ int differenceRows(const cv::Mat& bgr8, const cv::Mat& plate, const DifferenceFr
       const float ee = e0 * e0 + e1 * e1 + e2 * e2;
       const float s = ee > 1e-8f ? (lut[fx[0]] * e0 + lut[fx[1]] * e1 + lut[fx[2]] * e2) / ee : 0.0f;
       if (s >= d.min_shadow && s <= 1.0f) {
-        const int ds = std::max({std::abs(fx[0] - linearToSrgb8(s * e0)), std::abs(fx[1] - linearToSrgb8(s * e1)),
-                                 std::abs(fx[2] - linearToSrgb8(s * e2))});
+        const int r0 = fx[0] - linearToSrgb8(s * e0), r1 = fx[1] - linearToSrgb8(s * e1),
+                  r2 = fx[2] - linearToSrgb8(s * e2);
+        const int ds = std::max({std::abs(r0), std::abs(r1), std::abs(r2)});
         const float sigma = std::sqrt(d.sigma_frame * d.sigma_frame + s * s * d.sigma_plate * d.sigma_plate);
         if (ds <= 3.0f * sigma + 1.0f) {
-          c[x] = kScreen;
-          ++shadows;
+          c[x] = kShadowCandidate;
+          res[4 * x] = static_cast<std::int8_t>(std::clamp(r0, -127, 127));
+          res[4 * x + 1] = static_cast<std::int8_t>(std::clamp(r1, -127, 127));
+          res[4 * x + 2] = static_cast<std::int8_t>(std::clamp(r2, -127, 127));
+          res[4 * x + 3] = 1;
           continue;
         }
         diff = std::min(diff, ds);
       }
       c[x] = diff >= 2 * tol ? kFg : kUnknown;
+    }
+  }
+}
+
+// The shadow candidates of rows [y0, y1) decided by their neighbourhood: a shadow darkens the
+// plate and keeps its hue, so the residuals of the candidates around a pixel (5 x 5) average to
+// the noise's mean, 0, within 3 sigma / sqrt(n) and the hue a real shadow may take
+// (shadow_hue_levels); a costume that only looks like the plate darkened (dark brown hair over a
+// dark grey wall: 9 levels off in blue, within one pixel's noise) is off the same way at every
+// pixel. residual: differenceRows' (read only, so bands may run in parallel). Candidates that
+// fail become kUnknown (the two-colour alpha decides them). Returns the shadows kept.
+int shadowNeighbourhood(const cv::Mat& residual, const DifferenceFrame& d, int y0, int y1, cv::Mat& cls) {
+  int shadows = 0;
+  const float sigma = std::sqrt(d.sigma_frame * d.sigma_frame + d.sigma_plate * d.sigma_plate);
+  const int H = cls.rows, W = cls.cols;
+  for (int y = y0; y < y1; ++y) {
+    std::uint8_t* c = cls.ptr<std::uint8_t>(y);
+    const int ya = std::max(0, y - 2), yb = std::min(H - 1, y + 2);
+    // Column x's residuals over the window's rows, added with the sign given.
+    auto addColumn = [&](int xx, int sign, int* sum) {
+      if (xx < 0 || xx >= W) return;
+      for (int yy = ya; yy <= yb; ++yy) {
+        const std::int8_t* r = residual.ptr<std::int8_t>(yy) + 4 * xx;
+        for (int k = 0; k < 4; ++k) sum[k] += sign * r[k];
+      }
+    };
+    int sum[4] = {0, 0, 0, 0};  // the window's residuals, then its candidates' count
+    int window_x = -10;         // the x the sums are for
+    for (int x = 0; x < W; ++x) {
+      if (c[x] != kShadowCandidate) continue;
+      if (window_x == x - 1) {  // slide along a run of candidates
+        addColumn(x - 3, -1, sum);
+        addColumn(x + 2, 1, sum);
+      } else {
+        std::fill(sum, sum + 4, 0);
+        for (int xx = x - 2; xx <= x + 2; ++xx) addColumn(xx, 1, sum);
+      }
+      window_x = x;
+      const float count = static_cast<float>(sum[3]);
+      const float limit = (3.0f * sigma / std::sqrt(count) + d.hue_levels) * count;
+      const bool shadow = std::abs(sum[0]) <= limit && std::abs(sum[1]) <= limit && std::abs(sum[2]) <= limit;
+      c[x] = shadow ? kScreen : kUnknown;
+      shadows += shadow;
     }
   }
   return shadows;
@@ -937,6 +992,8 @@ void KeyerOptions::validate() const {
     bad("plate_tolerance", "must be in [1, 80] (got " + str(plate_tolerance) + ")");
   }
   if (!(min_shadow > 0 && min_shadow < 1)) bad("min_shadow", "must be in (0, 1) (got " + str(min_shadow) + ")");
+  if (!(shadow_hue_levels >= 0 && shadow_hue_levels <= 64))
+    bad("shadow_hue_levels", "must be in [0, 64] (got " + str(shadow_hue_levels) + ")");
   if (threads < 0) bad("threads", "must be >= 0 (got " + str(threads) + ")");
 }
 
@@ -1112,10 +1169,15 @@ KeyResult Keyer::key(const cv::Mat& frame, const std::string& source) {
   if (screen_.backdrop == Backdrop::kNone) {
     const DifferenceFrame diff = differenceFrame(bgr8, screen_, options_);
     screen_.exposure_gain = diff.gain;
+    shadow_residual_.create(H, W, CV_8SC4);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+    for (int band = 0; band < bands; ++band)
+      differenceRows(bgr8, screen_.plate, diff, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
+                     shadow_residual_);
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : shadows)
     for (int band = 0; band < bands; ++band)
-      shadows += differenceRows(bgr8, screen_.plate, diff, band * kBandRows,
-                                std::min(H, (band + 1) * kBandRows), cls);
+      shadows += shadowNeighbourhood(shadow_residual_, diff, band * kBandRows,
+                                     std::min(H, (band + 1) * kBandRows), cls);
   } else {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
     for (int band = 0; band < bands; ++band) {

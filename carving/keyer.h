@@ -86,6 +86,10 @@ struct KeyerOptions {
   // hair over an oak floor is the floor darkened 3-4x, with the floor's hue). Set it to the
   // lights' deepest shadow, fill / (fill + key): the synthetic studio's is 0.43.
   double min_shadow = 0.4;
+  // ... and keeps the plate's hue: around a shadow pixel (5 x 5), the mean of the candidates'
+  // residuals to the darkened plate is within noise and this many levels per channel (coloured
+  // fill light shifts a real shadow's hue a little; a costume is off the same way everywhere).
+  double shadow_hue_levels = 3;
   int threads = 0;  // OpenMP threads for one key() call (0 = OpenMP's default)
   void validate() const;  // throws Error naming the field
 };
@@ -177,6 +181,7 @@ class Keyer {
   cv::Mat garbage_memory_;  // CV_8UC1: garbage zone of earlier frames (no clean plate)
   // Scratch reused from frame to frame (the hot loops allocate nothing).
   cv::Mat classes_, alpha8_, need_rows_;
+  cv::Mat shadow_residual_;  // difference keying: the shadow candidates' residuals
   std::vector<std::vector<cv::Point>> band_refined_, band_seeds_;
   std::vector<std::vector<detail::LonePixel>> band_lone_;
 };

@@ -265,11 +265,13 @@ TEST(KeyerStudio, BlueScreenWitnessesMatchTruth) {
 // with its clean plate, sensor noise 2 on plate and frames, and the frames' exposure drifting
 // +3 %, -3 %, 0 % from the plate's. The backdrop is left to the keyer (auto: no screen in the
 // plate, so difference keying). Beside it, the green keyer with its plate on the green studio,
-// same frames, same noise and drift. Measured: difference IoU median 0.991, min 0.955 (22 of 24
-// at or above 0.97), no floor-shadow pixel keyed; green 0.9953 / 0.9918. What is lost is where
-// the actor is the background within noise: hair lit by the fill alone in front of the black
-// drapes (both ~0.03 linear, within 3 sigma of two noisy images: 10 levels), and a grey crate
-// face that is a grey-green panel darkened with its hue (a shadow to a per-pixel test).
+// same frames, same noise and drift. Measured: difference IoU median 0.992, min 0.982, no
+// floor-shadow pixel keyed; green 0.9953 / 0.9918. Shadows judged per pixel alone (before the
+// 5 x 5 hue test, keyer.h shadow_hue_levels): min 0.955, 2 of 24 below 0.97, the lost parts dark
+// brown hair over the dark grey wall and a grey crate top over a warm panel, each the plate
+// darkened within one pixel's noise but off its hue by 5-9 levels at every pixel. What is still
+// lost is where the actor is the background within noise (hair lit by the fill alone in front of
+// the black drapes, both ~0.03 linear).
 TEST(KeyerStudio, NoScreenSetKeyedByDifferenceAgainstTheCleanPlate) {
   const Studio set(synth::Backdrop::kSet), green(synth::Backdrop::kGreen);
   const double kGain[3] = {1.03, 0.97, 1.0};
@@ -306,7 +308,7 @@ TEST(KeyerStudio, NoScreenSetKeyedByDifferenceAgainstTheCleanPlate) {
         keyed[k] += cv::countNonZero(key.silhouette);
         shadow_in[k] += cv::countNonZero(shadow & key.silhouette);
         if (k == 0) {
-          EXPECT_GE(v[k], 0.95) << source;
+          EXPECT_GE(v[k], 0.97) << source;
           // The exposure found is the drift (the plate's gain is 1).
           EXPECT_NEAR(keyers[k].screen().exposure_gain, kGain[i], 0.01) << source;
         }
@@ -661,6 +663,12 @@ TEST(Keyer, OptionsNameTheBadField) {
   o = {};
   o.threads = -2;
   EXPECT_EQ(field(o), "threads");
+  o = {};
+  o.min_shadow = 1.0;
+  EXPECT_EQ(field(o), "min_shadow");
+  o = {};
+  o.shadow_hue_levels = -1;
+  EXPECT_EQ(field(o), "shadow_hue_levels");
   o = {};
   o.min_hole_px = -3;
   EXPECT_THROW(Keyer{o}, Error);

@@ -1,6 +1,7 @@
 // The rig bundle adjustment (multicam/detail/bundle.h). Lives at the folder root so the
 // module's source glob picks it up; its header is internal (detail/).
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -239,6 +240,47 @@ class FreeIntrinsicsCost final : public ceres::SizedCostFunction<2, kIntrinsicCo
   const double* weight_;
 };
 
+// A held camera whose centre is the rig's scale times its own (BundleProblem::rig_scale):
+// parameter blocks (board pose, rig scale). d r / d scale = (d r / d C) C0.
+class ScaledHeldCameraCost final : public ceres::SizedCostFunction<2, kPoseSize, 1> {
+ public:
+  ScaledHeldCameraCost(const double* intr, const Pose& T_world_cam, const Eigen::Vector3d& p_board,
+                       const Eigen::Vector2d& px, const double* weight)
+      : R_wc_(T_world_cam.linear()), C_(T_world_cam.translation()), p_board_(p_board), px_(px), weight_(weight) {
+    std::copy(intr, intr + kIntrinsicCount, intr_);
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* board = parameters[0];
+    const double scale = parameters[1][0];
+    Linearized l;
+    if (!rigResidual(intr_, R_wc_, scale * C_, paramsRotation(board), Eigen::Vector3d(board[4], board[5], board[6]),
+                     p_board_, px_, jacobians != nullptr, false, l))
+      return false;
+    const double w = *weight_;
+    residuals[0] = w * l.r.x();
+    residuals[1] = w * l.r.y();
+    if (jacobians) {
+      if (jacobians[0]) fillPoseJacobian(w * l.J_board, jacobians[0]);
+      if (jacobians[1]) {
+        const Eigen::Vector2d J_scale = w * l.J_cam.rightCols<3>() * C_;
+        jacobians[1][0] = J_scale.x();
+        jacobians[1][1] = J_scale.y();
+      }
+    }
+    return true;
+  }
+
+ private:
+  double intr_[kIntrinsicCount];
+  Eigen::Matrix3d R_wc_;
+  Eigen::Vector3d C_, p_board_;
+  Eigen::Vector2d px_;
+  const double* weight_;
+};
+
+// The rig's scale enters the solve (free, or held at a value other than 1): every camera held.
+bool scaledRig(const BundleProblem& p) { return p.rig_scale_free || p.rig_scale != 1.0; }
+
 double median(std::vector<double> v) {
   if (v.empty()) return 0;
   const size_t mid = v.size() / 2;
@@ -250,9 +292,10 @@ double median(std::vector<double> v) {
 struct Params {
   std::vector<std::array<double, kPoseSize>> cams, boards;
   std::vector<std::array<double, kIntrinsicCount>> intr;
+  double scale = 1.0;
 
   explicit Params(const BundleProblem& p) : cams(p.cameras.size()), boards(p.boards.size()),
-                                            intr(p.cameras.size()) {
+                                            intr(p.cameras.size()), scale(p.rig_scale) {
     for (size_t i = 0; i < p.cameras.size(); ++i) {
       poseToParams(p.cameras[i].T_world_cam, cams[i].data());
       calib::detail::cameraToVector(p.cameras[i].camera, intr[i].data());
@@ -265,15 +308,16 @@ struct Params {
       if (!p.cameras[i].free_intrinsics.empty()) calib::detail::vectorToCamera(intr[i].data(), p.cameras[i].camera);
     }
     for (size_t j = 0; j < p.boards.size(); ++j) p.boards[j].T_world_board = paramsToPose(boards[j].data());
+    p.rig_scale = scale;
   }
   // Residual (huge when the point is behind the camera) and whether it is in front.
   Eigen::Vector2d residual(const BundlePoint& pt, bool* in_front = nullptr) const {
     const double* cam = cams[pt.camera].data();
     const double* board = boards[pt.board].data();
     Linearized l;
-    const bool ok = rigResidual(intr[pt.camera].data(), paramsRotation(cam), Eigen::Vector3d(cam[4], cam[5], cam[6]),
-                                paramsRotation(board), Eigen::Vector3d(board[4], board[5], board[6]), pt.p_board,
-                                pt.px, false, false, l);
+    const bool ok = rigResidual(intr[pt.camera].data(), paramsRotation(cam),
+                                scale * Eigen::Vector3d(cam[4], cam[5], cam[6]), paramsRotation(board),
+                                Eigen::Vector3d(board[4], board[5], board[6]), pt.p_board, pt.px, false, false, l);
     if (in_front) *in_front = ok;
     return ok && l.r.allFinite() ? l.r : Eigen::Vector2d(1e9, 1e9);
   }
@@ -291,7 +335,7 @@ bool validIndex(const BundleProblem& p, const BundlePoint& pt) {
 
 bool hasFreeParameter(const BundleProblem& p, const BundlePoint& pt) {
   const BundleCamera& c = p.cameras[pt.camera];
-  return !c.pose_fixed || !c.free_intrinsics.empty() || !p.boards[pt.board].fixed;
+  return !c.pose_fixed || !c.free_intrinsics.empty() || !p.boards[pt.board].fixed || p.rig_scale_free;
 }
 
 // Drops (camera, board) views left with fewer than min_points active points: a board pose on a
@@ -356,8 +400,8 @@ Eigen::Vector2d bundleResidual(const BundleProblem& problem, const BundlePoint& 
   const Pose& T_wc = problem.cameras[point.camera].T_world_cam;
   const Pose& T_wb = problem.boards[point.board].T_world_board;
   Linearized l;
-  const bool ok = rigResidual(intr, T_wc.linear(), T_wc.translation(), T_wb.linear(), T_wb.translation(),
-                              point.p_board, point.px, false, false, l);
+  const bool ok = rigResidual(intr, T_wc.linear(), problem.rig_scale * T_wc.translation(), T_wb.linear(),
+                              T_wb.translation(), point.p_board, point.px, false, false, l);
   return ok && l.r.allFinite() ? l.r : Eigen::Vector2d(1e9, 1e9);
 }
 
@@ -382,6 +426,10 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
   PoseManifold pose_manifold;
   std::vector<std::unique_ptr<ceres::Manifold>> intrinsic_manifolds;
 
+  const bool scaled = scaledRig(problem);
+  assert(!scaled || std::all_of(problem.cameras.begin(), problem.cameras.end(), [](const BundleCamera& c) {
+           return c.pose_fixed && c.free_intrinsics.empty();
+         }));
   std::vector<ceres::ResidualBlockId> blocks(problem.points.size(), nullptr);
   std::vector<bool> cam_used(problem.cameras.size(), false), board_used(problem.boards.size(), false);
   for (size_t k = 0; k < problem.points.size(); ++k) {
@@ -389,7 +437,12 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
     if (!pt.active || !hasFreeParameter(problem, pt)) continue;
     double* cam = params.cams[pt.camera].data();
     double* board = params.boards[pt.board].data();
-    if (problem.cameras[pt.camera].free_intrinsics.empty()) {
+    if (scaled) {
+      blocks[k] = ceres_problem.AddResidualBlock(
+          new ScaledHeldCameraCost(params.intr[pt.camera].data(), problem.cameras[pt.camera].T_world_cam, pt.p_board,
+                                   pt.px, &problem.points[k].weight),
+          &loss, board, &params.scale);
+    } else if (problem.cameras[pt.camera].free_intrinsics.empty()) {
       blocks[k] = ceres_problem.AddResidualBlock(
           new FixedIntrinsicsCost(params.intr[pt.camera].data(), pt.p_board, pt.px, &problem.points[k].weight), &loss,
           cam, board);
@@ -400,10 +453,14 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
     cam_used[pt.camera] = true;
     board_used[pt.board] = true;
   }
-  bool any_free_board = false, any_free_camera = false;
+  bool any_free_board = false, any_free_camera = problem.rig_scale_free;
   ceres::ParameterBlockOrdering* ordering = new ceres::ParameterBlockOrdering;
+  if (scaled && ceres_problem.HasParameterBlock(&params.scale)) {
+    if (!problem.rig_scale_free) ceres_problem.SetParameterBlockConstant(&params.scale);
+    ordering->AddElementToGroup(&params.scale, 1);
+  }
   for (size_t i = 0; i < problem.cameras.size(); ++i) {
-    if (!cam_used[i]) continue;
+    if (!cam_used[i] || scaled) continue;  // a scaled rig's cameras are baked into their costs
     const BundleCamera& c = problem.cameras[i];
     any_free_camera = any_free_camera || !c.pose_fixed || !c.free_intrinsics.empty();
     ceres_problem.SetManifold(params.cams[i].data(), &pose_manifold);
@@ -531,16 +588,19 @@ double bundleSigmaPx(const BundleProblem& problem) {
   }
   for (size_t j = 0; j < problem.boards.size(); ++j)
     if (board_seen[j] && !problem.boards[j].fixed) free += 6;
+  if (problem.rig_scale_free) free += 1;
   const int dof = 2 * n - free;
   return dof > 0 ? std::sqrt(ssr / dof) : 0.0;
 }
 
 std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundleProblem& problem,
-                                                                 double sigma_px, bool* ok) {
+                                                                 double sigma_px, bool* ok,
+                                                                 double* rig_scale_sigma) {
   using Mat6 = Eigen::Matrix<double, 6, 6>;
   const int n_cams = static_cast<int>(problem.cameras.size());
   std::vector<Mat6> out(n_cams, Mat6::Zero());
   if (ok) *ok = false;
+  if (rig_scale_sigma) *rig_scale_sigma = 0;
 
   // Camera-side unknowns: 6 per free pose, then the free intrinsics.
   std::vector<int> pose_offset(n_cams, -1), intr_offset(n_cams, -1);
@@ -555,6 +615,7 @@ std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundlePro
       n_c += static_cast<int>(problem.cameras[i].free_intrinsics.size());
     }
   }
+  const int scale_offset = problem.rig_scale_free ? n_c++ : -1;
   if (n_c == 0) {
     if (ok) *ok = true;
     return out;
@@ -566,8 +627,9 @@ std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundlePro
     const BundleBoard& board = problem.boards[pt.board];
     double intr[kIntrinsicCount];
     calib::detail::cameraToVector(cam.camera, intr);
-    if (!rigResidual(intr, cam.T_world_cam.linear(), cam.T_world_cam.translation(), board.T_world_board.linear(),
-                     board.T_world_board.translation(), pt.p_board, pt.px, true, true, l))
+    if (!rigResidual(intr, cam.T_world_cam.linear(), problem.rig_scale * cam.T_world_cam.translation(),
+                     board.T_world_board.linear(), board.T_world_board.translation(), pt.p_board, pt.px, true, true,
+                     l))
       return false;
     l.r *= pt.weight;
     l.J_cam *= pt.weight;
@@ -581,6 +643,7 @@ std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundlePro
       for (size_t k = 0; k < free.size(); ++k)
         cols.push_back({intr_offset[pt.camera] + static_cast<int>(k), l.J_intr.col(free[k])});
     }
+    if (scale_offset >= 0) cols.push_back({scale_offset, l.J_cam.rightCols<3>() * cam.T_world_cam.translation()});
     return true;
   };
 
@@ -617,6 +680,7 @@ std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundlePro
   const Eigen::MatrixXd cov = S_inv * (sigma_px * sigma_px);
   for (int i = 0; i < n_cams; ++i)
     if (pose_offset[i] >= 0) out[i] = cov.block<6, 6>(pose_offset[i], pose_offset[i]);
+  if (rig_scale_sigma && scale_offset >= 0) *rig_scale_sigma = std::sqrt(cov(scale_offset, scale_offset));
   if (ok) *ok = true;
   return out;
 }

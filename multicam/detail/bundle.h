@@ -44,6 +44,11 @@ struct BundleProblem {
   std::vector<BundleCamera> cameras;
   std::vector<BundleBoard> boards;
   std::vector<BundlePoint> points;
+  // Every camera's centre is taken as rig_scale x T_world_cam.translation() (a rig imported in
+  // other units, or with none: multicam/floor_world.h); solved when rig_scale_free. Anything but
+  // 1 and held needs every camera's pose and intrinsics held (the scale would trade against them).
+  double rig_scale = 1.0;
+  bool rig_scale_free = false;
 };
 
 struct BundleOptions {
@@ -85,8 +90,10 @@ double bundleSigmaPx(const BundleProblem& problem);
 // Covariance of every camera's pose, [rotation (rad, world axes: R_world_cam perturbed as
 // exp(d) R); camera centre (m, world)], from the Gauss–Newton normal equations of the active
 // points (weighted) with the boards marginalised (Schur complement) and free intrinsics
-// included. Zero for fixed cameras. ok = false when the system is singular.
+// included. Zero for fixed cameras. ok = false when the system is singular. rig_scale_sigma,
+// when given: the standard deviation of a free rig_scale (0 when it is held).
 std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundleProblem& problem,
-                                                                 double sigma_px, bool* ok);
+                                                                 double sigma_px, bool* ok,
+                                                                 double* rig_scale_sigma = nullptr);
 
 }  // namespace previz::multicam::detail

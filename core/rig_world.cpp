@@ -126,6 +126,14 @@ void placeImport(RigImport& imported, const Pose& T_world_rig, double scale, con
     if (a.rfind("axes:", 0) == 0) a = "axes: previz's z up set by " + by + " (the file's own axes not used)";
 }
 
+std::string impliedScaleWarning(double implied_scale, double sigma, const std::string& who_implies,
+                                const ImportOptions& options) {
+  if (!(std::abs(implied_scale - 1.0) > kWarnScale)) return "";
+  return "world: " + who_implies + " a scale of " + fmt("%.4f", implied_scale) +
+         (sigma > 0 ? " +- " + fmt("%.2g", sigma) : std::string()) + " between the file and the world: is --units " +
+         options.units + " right? (--fit-scale fits it)";
+}
+
 WorldPlacement placeImportByPoints(RigImport& imported, const WorldPoints& points, const ImportOptions& options) {
   if (options.flip != "none")
     throw Error("--world points fixes the world's axes itself; leave out --flip (got '" + options.flip + "')",
@@ -149,10 +157,10 @@ WorldPlacement placeImportByPoints(RigImport& imported, const WorldPoints& point
   if (w.max_m > kWarnResidualM)
     r.warnings.push_back("world: point '" + w.worst + "' is " + fmt("%.1f", w.max_m * 1e3) +
                          " mm from where the others put it: mismeasured, or a different point in the two frames?");
-  if (!points.fit_scale && std::abs(w.implied_scale - 1.0) > kWarnScale)
-    r.warnings.push_back("world: the points imply a scale of " + fmt("%.4f", w.implied_scale) +
-                         " between the file and the world: is --units " + options.units +
-                         " right? (fit_scale: true in the points file fits it)");
+  if (!points.fit_scale) {
+    const std::string warning = impliedScaleWarning(w.implied_scale, 0, "the points imply", options);
+    if (!warning.empty()) r.warnings.push_back(warning);
+  }
   return w;
 }
 

@@ -57,6 +57,12 @@ void placeRig(Rig& rig, const Pose& T_world_rig, double scale, const std::string
 void placeImport(RigImport& imported, const Pose& T_world_rig, double scale, const std::string& world_frame,
                  const std::string& by);
 
+// The warning of a placement that kept the file's scale when its reference implies one more
+// than 1 % from 1 (a wrong --units, a rig without metric scale); empty within 1 %. who_implies:
+// "the points imply", "the floor board implies"; sigma > 0 is printed with the scale.
+std::string impliedScaleWarning(double implied_scale, double sigma, const std::string& who_implies,
+                                const ImportOptions& options);
+
 // --world points:FILE on an import: fits, places the rig, and writes into the report what was
 // assumed (the points' frames and units, rigid or with a scale) and how the points agree;
 // warns when a point is off by more than 1 cm or the implied scale is off 1 by more than 1 %

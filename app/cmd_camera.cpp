@@ -30,7 +30,7 @@ struct CameraArgs {
   // export / stmap / info
   std::string rig, opencv_dir, krt_out, projection_out, kalibr_out, colmap_out, camera, stmap_dir;
   double overscan = 0.0;
-  bool json = false;
+  bool fit_scale = false, json = false;
 };
 
 int runImport(const CameraArgs& a) {
@@ -68,14 +68,25 @@ int runImport(const CameraArgs& a) {
     imported = !a.krt.empty() ? importKRtRows(a.krt, opt) : importProjectionRows(a.projection, opt);
   }
   // --world: the rig moved into previz's world from points known in both frames, or from the
-  // floor board a take shows (core/rig_world.h, multicam/floor_world.h).
+  // floor board a take shows (core/rig_world.h, multicam/floor_world.h); --fit-scale: the scale
+  // of a rig without one (COLMAP) fitted to them too.
+  if (a.fit_scale && a.world.empty())
+    throw Error("fits the rig's scale to the points or floor board of --world: give --world",
+                fieldContext("--fit-scale"));
   if (!a.world.empty()) {
     const size_t colon = a.world.find(':');
     const std::string kind = a.world.substr(0, colon), where = colon == std::string::npos ? "" : a.world.substr(colon + 1);
     if (where.empty() || (kind != "points" && kind != "floor"))
       throw Error("give points:FILE.json or floor:TAKE_DIR (got '" + a.world + "')", fieldContext("--world"));
-    if (kind == "points") placeImportByPoints(imported, readWorldPoints(where), opt);
-    else multicam::placeImportOnFloor(imported, where, opt);
+    if (kind == "points") {
+      WorldPoints points = readWorldPoints(where);
+      points.fit_scale = points.fit_scale || a.fit_scale;
+      placeImportByPoints(imported, points, opt);
+    } else {
+      multicam::FloorPlacementOptions floor;
+      floor.fit_scale = a.fit_scale;
+      multicam::placeImportOnFloor(imported, where, opt, floor);
+    }
   }
   writeRig(imported.rig, a.out);
   std::cerr << imported.report.fullReport();
@@ -206,6 +217,10 @@ Runner addCameraCommand(CLI::App& app) {
                   "Place the rig in previz's world (z up, floor z = 0): points:FILE.json (3+ points with "
                   "\"world\" metres and \"rig\" in the file's frame and --units; docs/formats.md) or "
                   "floor:TAKE_DIR (the floor board of TAKE_DIR/floor.json seen by the imported cameras)");
+  imp->add_flag("--fit-scale", a->fit_scale,
+                "With --world: fit the rig's scale too (a rig without metric scale: COLMAP, another "
+                "reconstruction); floor: needs 2+ cameras seeing the board from places apart. Points: as "
+                "\"fit_scale\": true in the file");
   imp->add_option("--out", a->out, "rig.json to write")->required();
   imp->add_flag("--json", a->json, "JSON summary (with the import report) on stdout");
 

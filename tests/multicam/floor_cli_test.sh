@@ -3,7 +3,8 @@
 # a take of two still frames of the board lying on the floor (synth --floor-only) calibrated
 # with known intrinsics against its truth; a camera turned away from the board named; another
 # tool's rig, moved to an arbitrary frame, brought back to previz's world by `camera import
-# --world` from surveyed points (exact) and from the floor board of the take (a few mm).
+# --world` from surveyed points (exact) and from the floor board of the take (a few mm); the
+# same rig at COLMAP's arbitrary scale, through a COLMAP model, made metric by --fit-scale.
 #   floor_cli_test.sh PREVIZ_BIN SHARED_DATA TMPDIR
 set -uo pipefail
 bin="$1"; data="$2"; tmp="$3"
@@ -113,6 +114,33 @@ if "$bin" camera import --opencv "${yamls[@]}" --world "points:$tmp/to_other.jso
     grep -q "the floor board of" "$tmp/back_floor.err" && ok "the import report names the floor board" \
       || fail "report: $(cat "$tmp/back_floor.err")"
   else fail "camera import --world floor: $(tail -n 3 "$tmp/back_floor.err")"; fi
+  # 4. COLMAP's reconstruction of it: the other frame at scale 0.137, as a COLMAP model.
+  cat > "$tmp/to_colmap.json" <<'JSON'
+{"fit_scale": true, "points": [
+  {"name": "a", "rig": [0, 0, 0], "world": [5, -2, 1]},
+  {"name": "b", "rig": [1, 0, 0], "world": [5, -1.863, 1]},
+  {"name": "c", "rig": [0, 1, 0], "world": [4.863, -2, 1]},
+  {"name": "d", "rig": [0, 0, 1], "world": [5, -2, 1.137]}]}
+JSON
+  if "$bin" camera import --opencv "${yamls[@]}" --world "points:$tmp/to_colmap.json" --out "$tmp/colmap_rig.json" \
+       >/dev/null 2>&1 && "$bin" camera export --rig "$tmp/colmap_rig.json" --colmap "$tmp/colmap" >/dev/null 2>&1; then
+    if "$bin" camera import --colmap "$tmp/colmap" --world "floor:$take" --fit-scale --out "$tmp/back_colmap.json" \
+         --json >"$tmp/back_colmap.out" 2>"$tmp/back_colmap.err"; then
+      d=$(max_centre_distance "$take/truth/rig.json" "$tmp/back_colmap.json")
+      echo "   --world floor --fit-scale: worst centre ${d} m; $(grep -o 'scaled by [^,]*' "$tmp/back_colmap.err")"
+      # As the metric rig's placement (0.7 mm) and the scale's error (~1e-4, 0.5 mm at 5 m).
+      below "$d" 0.005 && ok "--fit-scale brings COLMAP's rig back within 5 mm ($d m)" || fail "--fit-scale: $d m"
+      grep -Eq "scaled by 7\.(29|30)" "$tmp/back_colmap.err" && ok "the import report gives the scale fitted" \
+        || fail "report: $(cat "$tmp/back_colmap.err")"
+    else fail "camera import --colmap --world floor --fit-scale: $(tail -n 3 "$tmp/back_colmap.err")"; fi
+    if "$bin" camera import --colmap "$tmp/colmap" --world "floor:$take" --out "$tmp/kept_colmap.json" \
+         >/dev/null 2>"$tmp/kept_colmap.err"; then
+      grep -q "WARNING.*floor board implies a scale of 7\.2.*--fit-scale" "$tmp/kept_colmap.err" \
+        && ok "without --fit-scale the scale the board implies is warned about" || fail "report: $(cat "$tmp/kept_colmap.err")"
+    else fail "camera import --colmap --world floor: $(tail -n 3 "$tmp/kept_colmap.err")"; fi
+  else fail "making the COLMAP model failed"; fi
+  expect_fail "--fit-scale without --world names the flag" "--fit-scale" \
+    "$bin" camera import --colmap "$tmp/colmap" --fit-scale --out "$tmp/x.json"
   expect_fail "--world with an unknown kind names the flag" "--world" \
     "$bin" camera import --opencv "${others[@]}" --world "survey:$tmp/from_other.json" --out "$tmp/x.json"
   expect_fail "--world points with --flip names the flag" "flip" \

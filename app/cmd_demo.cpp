@@ -2,7 +2,7 @@
 // camera's intrinsics from its own board take (intrinsics preset: detect, solve, calib report
 // pictures), calibrates the rig from a rig take (rig preset: board waved, then on the floor;
 // intrinsics held at the calibrated ones), runs the live frame (key -> carve -> main-view depth
-// -> track props -> composite, app/frame_loop.h) over the studio take with the calibrated rig (the main
+// -> track props -> composite, live/frame_loop.h) over the studio take with the calibrated rig (the main
 // camera's dolly motion from the take's tracker file, relative to where it stood during the rig
 // take) and, for comparison, with the take's true rig, and writes a report page (report.html):
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
@@ -19,7 +19,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
-#include "app/frame_loop.h"
+#include "live/frame_loop.h"
+#include "live/inputs.h"
 #include "app/options.h"
 #include "app/progress.h"
 #include "calib/detect.h"
@@ -42,6 +43,15 @@
 #include "tracking/tracker.h"
 
 namespace previz::app {
+// The live frame (live/frame_loop.h, live/inputs.h).
+using live::FrameLoop;
+using live::FrameLoopOptions;
+using live::FrameState;
+using live::TakeReader;
+using live::TakeInputOptions;
+using live::PropStage;
+using live::PropStageOptions;
+using live::StageTime;
 namespace {
 
 namespace fs = std::filesystem;
@@ -268,7 +278,7 @@ RigCalib calibrateRigTake(const synth::SynthOptions& studio, const std::vector<C
 
 // The camera tracker's file for the studio take: main's motion T_main0_main(f) from where it
 // stood during the rig take (the tracker is zeroed there), here taken from the take's
-// truth/main_poses.jsonl as a tracker would give it (app/frame_loop.h TakeInputOptions).
+// truth/main_poses.jsonl as a tracker would give it (live/frame_loop.h TakeInputOptions).
 void writeTrackedMain(const fs::path& take, const Pose& T_world_main0, const fs::path& path) {
   std::istringstream in(readTextFile(take / "truth" / "main_poses.jsonl"));
   std::string lines;

@@ -1,5 +1,5 @@
 // previz run: the live previz frame over a take — per frame key -> carve -> main-view depth ->
-// track props -> composite (app/frame_loop.h), writing composites, depth, the main camera's and
+// track props -> composite (live/frame_loop.h), writing composites, depth, the main camera's and
 // the props' poses and, on request, meshes, debug layers and a video; a progress line with
 // per-stage ms and fps.
 // previz bench run: the same loop on frames held in memory, ms per stage, as JSON.
@@ -18,7 +18,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "app/commands.h"
-#include "app/frame_loop.h"
+#include "live/frame_loop.h"
+#include "live/inputs.h"
 #include "app/options.h"
 #include "app/progress.h"
 #include "calib/lens_table.h"
@@ -34,6 +35,18 @@
 #include "tracking/tracker.h"
 
 namespace previz::app {
+// The live frame (live/frame_loop.h, live/inputs.h).
+using live::FrameLoop;
+using live::FrameLoopOptions;
+using live::FrameState;
+using live::TakeReader;
+using live::LiveReader;
+using live::LiveOptions;
+using live::TakeInputOptions;
+using live::PropStage;
+using live::PropStageOptions;
+using live::StageTime;
+using live::kLiveVoxelM;
 namespace {
 
 namespace fs = std::filesystem;

@@ -3,7 +3,7 @@
 // srt://, http://...), a video file played as if live, or a GStreamer pipeline (text with '!'),
 // opened through OpenCV's VideoCapture. Frames come as the take model gives every image (8-bit
 // sRGB-coded BGR, take/take.h). A take names live cameras in take.json "sources" as
-// "live:<source>"; `previz run` reads them (or --live NAME=SOURCE) through app/frame_loop.h's
+// "live:<source>"; `previz run` reads them (or --live NAME=SOURCE) through live/inputs.h's
 // LiveReader, which paces them: before each frame every camera is advanced (grab, no decode) to
 // the frame the clock says the cameras are at.
 #include <memory>

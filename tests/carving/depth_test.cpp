@@ -135,7 +135,7 @@ TEST(HullDepth, OrdersActorAgainstPlanesLikeTheExactHull) {
   }
 }
 
-// The live loop carves at 1 cm (app/frame_loop.h kLiveVoxelM): its main-view depth must still be
+// The live loop carves at 1 cm (live/frame_loop.h kLiveVoxelM): its main-view depth must still be
 // the exact hull of the masks, the rays finding the crossing below the cell size. Measured: 99 %
 // of pixels within 0.07 mm of the exact hull (0.02 mm at 5 mm); the 10 cm in-front ordering
 // 98.41 % against the exact hull's 98.37 % (1 cm misses a few hull slivers thinner than its

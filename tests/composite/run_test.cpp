@@ -55,11 +55,11 @@ TEST(FrameLoop, BinnedWitnessPlateOfTheWrongSizeDropsThatCamera) {
   src.rig_path = take / "truth" / "rig.json";
   src.main_poses = take / "truth" / "main_poses.jsonl";
   const carving::Take t(src);
-  app::FrameLoopOptions o;
+  live::FrameLoopOptions o;
   o.witness_bin = 2;
-  app::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o);
-  const app::TakeReader reader(t, loop, app::TakeInputOptions{});
-  app::FrameState s;
+  live::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o);
+  const live::TakeReader reader(t, loop, live::TakeInputOptions{});
+  live::FrameState s;
   reader.read(1, s);
   ASSERT_GE(s.witness_plates.size(), 2u);
   const cv::Size full = s.witness_plates[0].size();
@@ -72,7 +72,7 @@ TEST(FrameLoop, BinnedWitnessPlateOfTheWrongSizeDropsThatCamera) {
   for (size_t i = 1; i < s.dropped.size(); ++i) EXPECT_EQ(s.dropped[i], "") << loop.carveCameras()[i];
   EXPECT_FALSE(s.composite.bgr.empty());
   o.witness_bin = 9;
-  EXPECT_THROW(app::FrameLoop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o), Error);
+  EXPECT_THROW(live::FrameLoop(t.rig(), readCgCamera(take / "cg" / "camera.json"), o), Error);
 }
 
 // The plug-in point of later stages (prop tracking goes after "depth"): an inserted stage runs
@@ -84,18 +84,18 @@ TEST(FrameLoop, InsertedStageRunsInItsPlaceAndIsTimed) {
   src.rig_path = take / "truth" / "rig.json";
   src.main_poses = take / "truth" / "main_poses.jsonl";
   const carving::Take t(src);
-  app::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), app::FrameLoopOptions{});
+  live::FrameLoop loop(t.rig(), readCgCamera(take / "cg" / "camera.json"), live::FrameLoopOptions{});
   bool saw_depth = false, saw_composite = true;
-  loop.insertStage("depth", "probe", [&](app::FrameState& s) {
+  loop.insertStage("depth", "probe", [&](live::FrameState& s) {
     saw_depth = !s.main_depth.empty();
     saw_composite = !s.composite.bgr.empty();
   });
   EXPECT_EQ(loop.stages(), (std::vector<std::string>{"key", "carve", "depth", "probe", "composite"}));
-  EXPECT_THROW(loop.insertStage("nosuch", "x", [](app::FrameState&) {}), Error);
-  const app::TakeReader reader(t, loop, app::TakeInputOptions{});
-  app::FrameState s;
+  EXPECT_THROW(loop.insertStage("nosuch", "x", [](live::FrameState&) {}), Error);
+  const live::TakeReader reader(t, loop, live::TakeInputOptions{});
+  live::FrameState s;
   reader.read(1, s);
-  const std::vector<app::StageTime> times = loop.run(s);
+  const std::vector<live::StageTime> times = loop.run(s);
   ASSERT_EQ(times.size(), 5u);
   EXPECT_EQ(times[3].stage, "probe");
   EXPECT_TRUE(saw_depth);
@@ -116,9 +116,9 @@ TEST(RunLive, ReadsVideoFilesInLockStepAndDropsLateFrames) {
   src.main_poses = take / "truth" / "main_poses.jsonl";
   const carving::Take t(src);
   const Camera cg = readCgCamera(take / "cg" / "camera.json");
-  app::FrameLoop loop(t.rig(), cg, app::FrameLoopOptions{});
-  const app::TakeReader reader(t, loop, app::TakeInputOptions{});
-  app::LiveOptions live;
+  live::FrameLoop loop(t.rig(), cg, live::FrameLoopOptions{});
+  const live::TakeReader reader(t, loop, live::TakeInputOptions{});
+  live::LiveOptions live;
   std::vector<std::string> names = loop.carveCameras();
   names.push_back(loop.mainCamera());
   for (const std::string& name : names) {
@@ -133,10 +133,10 @@ TEST(RunLive, ReadsVideoFilesInLockStepAndDropsLateFrames) {
 
   live.pace = false;
   {
-    app::LiveReader in(loop, reader, live);
+    live::LiveReader in(loop, reader, live);
     int frames = 0;
     double min_psnr = 99;
-    for (app::FrameState s; in.next(s); ++frames) {
+    for (live::FrameState s; in.next(s); ++frames) {
       EXPECT_EQ(s.frame, frames);
       loop.run(s);
       const cv::Mat truth = readImage(take / "truth" / "composite" / (stem(s.frame) + ".png"), cv::IMREAD_COLOR);
@@ -162,22 +162,22 @@ TEST(RunLive, ReadsVideoFilesInLockStepAndDropsLateFrames) {
     lsrc.take_dir = live_take;
     const carving::Take lt(lsrc);
     EXPECT_EQ(lt.streams().stream("main").kind, take::SourceKind::kLive);
-    app::TakeInputOptions lio;
+    live::TakeInputOptions lio;
     lio.cg_dir = take / "cg";
-    const app::TakeReader lreader(lt, loop, lio);
-    app::LiveOptions from_take;
+    const live::TakeReader lreader(lt, loop, lio);
+    live::LiveOptions from_take;
     from_take.pace = false;
-    app::LiveReader in(loop, lreader, from_take);
+    live::LiveReader in(loop, lreader, from_take);
     int frames = 0;
-    for (app::FrameState s; in.next(s); ++frames) EXPECT_EQ(s.frame, frames);
+    for (live::FrameState s; in.next(s); ++frames) EXPECT_EQ(s.frame, frames);
     EXPECT_EQ(frames, static_cast<int>(t.frames().size()));
   }
   live.pace = true;
   live.fps = 1000;  // cameras far faster than the loop
   {
-    app::LiveReader in(loop, reader, live);
+    live::LiveReader in(loop, reader, live);
     std::vector<int> seen;
-    for (app::FrameState s; in.next(s);) {
+    for (live::FrameState s; in.next(s);) {
       seen.push_back(s.frame);
       loop.run(s);
     }
@@ -193,7 +193,7 @@ TEST(RunLive, ReadsVideoFilesInLockStepAndDropsLateFrames) {
   }
   live.sources[loop.mainCamera()] = (dir / "nosuch.avi").string();
   try {
-    app::LiveReader in(loop, reader, live);
+    live::LiveReader in(loop, reader, live);
     FAIL() << "opened a missing file";
   } catch (const Error& e) {
     EXPECT_EQ(e.context().camera, loop.mainCamera());

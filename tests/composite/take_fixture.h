@@ -17,7 +17,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "app/frame_loop.h"
+#include "live/frame_loop.h"
+#include "live/inputs.h"
 #include "carving/take.h"
 #include "composite/measure.h"
 #include "composite/output.h"
@@ -122,7 +123,7 @@ inline cv::Mat trueCgDepth(const RigCamera& main_true, double time_s) {
 // Runs the frame loop on every frame of the take with 'rig' (+ main poses as given) and measures
 // each frame against truth. 'label' heads the printed table.
 // tracked_poses: "" = the take's true world poses of main (truth/main_poses.jsonl); else the
-// camera tracker's T_main0_main lines (app/frame_loop.h TakeInputOptions).
+// camera tracker's T_main0_main lines (live/frame_loop.h TakeInputOptions).
 inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_path, const fs::path& tracked_poses,
                                const char* label, int witness_bin = 1) {
   carving::TakeSource src;
@@ -131,13 +132,13 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
   if (tracked_poses.empty()) src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   const carving::Take take(src);
   const Camera cg = readCgCamera(take_dir / "cg" / "camera.json");
-  app::FrameLoopOptions lo;
+  live::FrameLoopOptions lo;
   lo.debug_layers = true;
   lo.witness_bin = witness_bin;
-  app::FrameLoop loop(take.rig(), cg, lo);
-  app::TakeInputOptions io;
+  live::FrameLoop loop(take.rig(), cg, lo);
+  live::TakeInputOptions io;
   io.tracked_main_poses = tracked_poses;
-  const app::TakeReader reader(take, loop, io);
+  const live::TakeReader reader(take, loop, io);
 
   // Truth side of the main camera: the true rig and the true poses.
   carving::TakeSource truth_src = src;
@@ -148,12 +149,12 @@ inline TakeMeasure measureTake(const fs::path& take_dir, const fs::path& rig_pat
   TakeMeasure out;
   std::printf("  %s:\n", label);
   for (int f : take.frames()) {
-    app::FrameState s;
+    live::FrameState s;
     reader.read(f, s);
-    const std::vector<app::StageTime> times = loop.run(s);
+    const std::vector<live::StageTime> times = loop.run(s);
     FrameMeasure m;
     m.frame = f;
-    for (const app::StageTime& t : times) m.comp_ms += t.ms;
+    for (const live::StageTime& t : times) m.comp_ms += t.ms;
     const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (stem(f) + ".png"), cv::IMREAD_COLOR);
     const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (stem(f) + ".png"), cv::IMREAD_GRAYSCALE);
     const cv::Mat true_depth = readDepthExr(take_dir / "truth" / "depth" / "main" / (stem(f) + ".exr"));

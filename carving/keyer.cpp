@@ -1120,6 +1120,12 @@ void Keyer::setCleanPlate(const cv::Mat& plate, const std::string& source) {
 }
 
 KeyResult Keyer::key(const cv::Mat& frame, const std::string& source) {
+  KeyResult result;
+  key(frame, source, result);
+  return result;
+}
+
+void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& result) {
   checkImage(frame, source);
   if (has_screen_ && screen_.from_clean_plate && frame.size() != screen_.plate.size()) {
     fail("frame is " + str(frame.cols) + "x" + str(frame.rows) + " but the clean plate is " +
@@ -1209,7 +1215,7 @@ KeyResult Keyer::key(const cv::Mat& frame, const std::string& source) {
   // foreground may hold a little of it: a dark costume's edge keeps the screen's chroma).
   alpha8_.create(H, W, CV_8UC1);
   need_rows_.create(bands, W, CV_8UC1);
-  KeyResult result;
+  result.stats = {};
   result.silhouette.create(H, W, CV_8UC1);
   const int radius = options_.edge_radius_px;
   const int threshold8 = static_cast<int>(std::lround(options_.silhouette_threshold * 255.0));
@@ -1291,11 +1297,18 @@ KeyResult Keyer::key(const cv::Mat& frame, const std::string& source) {
   result.stats.shadow_px = shadows;
   cleanSilhouette(result.silhouette, alpha8_, options_, result.stats);
   if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
-  return result;
+  else result.alpha.release();
 }
 
 cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen,
                 const KeyerOptions& options) {
+  cv::Mat out;
+  despill(frame, key, screen, options, out);
+  return out;
+}
+
+void despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen, const KeyerOptions& options,
+             cv::Mat& out) {
   checkImage(frame, "despill");
   // Blue screen: despilled in the working order (blue and green swapped) and swapped back.
   cv::Mat swapped;
@@ -1308,14 +1321,18 @@ cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& s
   const bool use_plate = screen.from_clean_plate && screen.plate.size() == bgr8.size();
   const auto& lut = srgb8ToLinear();
   const int W = bgr8.cols, H = bgr8.rows, radius = options.edge_radius_px;
-  cv::Mat out(H, W, CV_8UC3);
+  // Blue: written in the working order, then swapped into 'out'.
+  cv::Mat work_blue;
+  cv::Mat& work = screen.backdrop == Backdrop::kBlue ? work_blue : out;
+  work.create(H, W, CV_8UC3);
+  const bool spill = screen.backdrop != Backdrop::kNone;
   const int threads = threadCount(options.threads);
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
   for (int y = 0; y < H; ++y) {
     const std::uint8_t* in = bgr8.ptr<std::uint8_t>(y);
     const float* a = key.alpha.ptr<float>(y);
-    std::uint8_t* o = out.ptr<std::uint8_t>(y);
-    for (int x = 0; x < W; ++x) {
+    std::uint8_t* o = work.ptr<std::uint8_t>(y);
+    auto pixel = [&](int x) {
       const std::uint8_t* p = in + 3 * x;
       std::uint8_t* q = o + 3 * x;
       const float alpha = a[x];
@@ -1323,13 +1340,13 @@ cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& s
         q[0] = p[0];
         q[1] = p[1];
         q[2] = p[2];
-        continue;
+        return;
       }
       if (alpha <= 0.0f && screen.backdrop == Backdrop::kNone) {
         q[0] = p[0];  // no screen: nothing spilt
         q[1] = p[1];
         q[2] = p[2];
-        continue;
+        return;
       }
       if (alpha <= 0.0f) {
         // Green limited to max(R, B) in linear light; the decode is monotonic, so that is the
@@ -1337,7 +1354,7 @@ cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& s
         q[0] = p[0];
         q[1] = std::min(p[1], std::max(p[0], p[2]));
         q[2] = p[2];
-        continue;
+        return;
       }
       const float cb = lut[p[0]], cg = lut[p[1]], cr = lut[p[2]];
       // Local screen colour: the alpha-0 neighbours (as the keyer's edge alpha).
@@ -1388,13 +1405,30 @@ cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& s
       q[0] = linearToSrgb8(std::max(0.0f, (cb - rest * bb) * inv));
       q[1] = linearToSrgb8(std::max(0.0f, (cg - rest * bgreen) * inv));
       q[2] = linearToSrgb8(std::max(0.0f, (cr - rest * br) * inv));
+    };
+    int x = 0;
+#if CV_SIMD128
+    // 16 pixels at a time where all are opaque (copied) or all clear (green limited): most of
+    // a frame; the transition goes pixel by pixel.
+    const cv::v_float32x4 one = cv::v_setall_f32(1.0f), zero = cv::v_setzero_f32();
+    for (; x + 16 <= W; x += 16) {
+      const cv::v_float32x4 a0 = cv::v_load(a + x), a1 = cv::v_load(a + x + 4), a2 = cv::v_load(a + x + 8),
+                            a3 = cv::v_load(a + x + 12);
+      if (cv::v_check_all((a0 >= one) & (a1 >= one) & (a2 >= one) & (a3 >= one)) ||
+          (!spill && cv::v_check_all((a0 <= zero) & (a1 <= zero) & (a2 <= zero) & (a3 <= zero)))) {
+        std::memcpy(o + 3 * x, in + 3 * x, 48);
+      } else if (cv::v_check_all((a0 <= zero) & (a1 <= zero) & (a2 <= zero) & (a3 <= zero))) {
+        cv::v_uint8x16 b, g, r;
+        cv::v_load_deinterleave(in + 3 * x, b, g, r);
+        cv::v_store_interleave(o + 3 * x, b, cv::v_min(g, cv::v_max(b, r)), r);
+      } else {
+        for (int i = 0; i < 16; ++i) pixel(x + i);
+      }
     }
+#endif
+    for (; x < W; ++x) pixel(x);
   }
-  if (screen.backdrop == Backdrop::kBlue) {
-    swapBlueGreen(out, swapped);
-    return swapped;
-  }
-  return out;
+  if (screen.backdrop == Backdrop::kBlue) swapBlueGreen(work_blue, out);
 }
 
 }  // namespace previz::carving

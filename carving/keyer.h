@@ -165,6 +165,10 @@ class Keyer {
   // clean plate / model was set. 'source' names the frame in errors (wrong type, empty image,
   // size unlike the plate's, no screen found).
   KeyResult key(const cv::Mat& bgr8, const std::string& source = {});
+  // The same into 'result', its images reused when they have the frame's size (a live loop's
+  // buffers: no allocation, no page faults per frame). Whoever still holds result's images
+  // from an earlier frame sees them overwritten.
+  void key(const cv::Mat& bgr8, const std::string& source, KeyResult& result);
   const ScreenModel& screen() const { return screen_; }
   bool hasScreen() const { return has_screen_; }
   const KeyerOptions& options() const { return options_; }
@@ -194,5 +198,8 @@ class Keyer {
 // it; where alpha = 0, F is C with green limited to max(R, B) (it is never seen).
 cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen,
                 const KeyerOptions& options = {});
+// The same into 'out', reused when it has the frame's size and type (see Keyer::key).
+void despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen, const KeyerOptions& options,
+             cv::Mat& out);
 
 }  // namespace previz::carving

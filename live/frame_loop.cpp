@@ -104,6 +104,8 @@ struct FrameLoop::Impl {
   std::unique_ptr<composite::Compositor> compositor;
   std::vector<std::pair<std::string, StageFn>> stages;
   composite::CompositeResult result;  // images reused frame after frame
+  carving::KeyResult main_key;        // likewise (the main camera's 2 Mpx: no allocation per frame)
+  cv::Mat foreground;
 
   int threads() const { return options.threads > 0 ? options.threads : omp_get_max_threads(); }
 
@@ -130,8 +132,10 @@ struct FrameLoop::Impl {
           }
           s.silhouettes[i] = keyers[i].key(witnessPlate(s, i), carve_names[i]).silhouette;
         } else {
-          s.main_key = keyers[n].key(s.main_plate, main_name);
-          s.foreground = carving::despill(s.main_plate, s.main_key, keyers[n].screen(), keyers[n].options());
+          keyers[n].key(s.main_plate, main_name, main_key);
+          carving::despill(s.main_plate, main_key, keyers[n].screen(), keyers[n].options(), foreground);
+          s.main_key = main_key;
+          s.foreground = foreground;
         }
       } catch (const std::exception& e) {
         errors[i] = e.what();

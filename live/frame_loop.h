@@ -89,6 +89,7 @@ struct FrameState {
   composite::CgFrame cg;
   // Stage results.
   std::vector<cv::Mat> silhouettes;          // carving cameras
+  // The main camera's key and despilled plate: the loop's buffers, shared like 'composite'.
   carving::KeyResult main_key;
   cv::Mat foreground;                        // despilled main plate
   carving::VisualHull hull;

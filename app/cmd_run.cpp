@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
 #include "live/frame_loop.h"
@@ -23,11 +24,14 @@
 #include "app/options.h"
 #include "app/progress.h"
 #include "calib/lens_table.h"
+#include "batch/manifest.h"
 #include "carving/run.h"
+#include "composite/measure.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
 #include "core/pose.h"
+#include "datasets/scene.h"
 #include "datasets/synth.h"
 #include "take/convert.h"
 #include "take/take.h"
@@ -437,6 +441,78 @@ fs::path defaultBenchTake(const std::string& out, int frame_count, double fps, d
   return take_dir;
 }
 
+// How good the frames bench run times are, against the synthetic take's truth (truth/labels:
+// the keyer's foreground is the actor and the props; truth/masks/main, truth/composite) and the exact hull of the same silhouettes (a 5 mm carve: the live loop
+// carves at 1 cm, docs/formats.md): witness silhouettes' IoU, main-view depth against that
+// hull (mm, where both have depth), composite PSNR over the actor's bounding box. Nothing when
+// the take has no truth (a real take).
+class BenchQuality {
+ public:
+  BenchQuality(const fs::path& take_dir, const FrameLoop& loop) : take_dir_(take_dir), loop_(loop) {
+    if (!fs::is_directory(take_dir / "truth" / "labels")) return;
+    carving::HullOptions fine = loop.carver().options();
+    fine.voxel_m = 0.005;
+    exact_ = std::make_unique<carving::Carver>(loop.carver().cameras(), fine);
+  }
+
+  void add(const FrameState& s) {
+    if (!exact_) return;
+    const fs::path truth = take_dir_ / "truth";
+    const std::string stem = batch::frameStem(s.frame) + ".png";
+    const std::vector<std::string>& names = loop_.carveCameras();
+    for (size_t i = 0; i < names.size() && i < s.silhouettes.size(); ++i) {
+      const fs::path path = truth / "labels" / names[i] / stem;
+      if (s.silhouettes[i].empty() || !fs::exists(path)) continue;
+      const cv::Mat labels = readImage(path, 0 /* grey */);
+      cv::Mat mask = (labels == static_cast<int>(synth::ObjectClass::kActor)) |
+                     (labels == static_cast<int>(synth::ObjectClass::kProp));
+      if (mask.size() != s.silhouettes[i].size()) {  // witnesses keyed binned (--witness-bin)
+        cv::resize(mask, mask, s.silhouettes[i].size(), 0, 0, cv::INTER_AREA);
+      }
+      const cv::Mat truth_in = mask > 127, key_in = s.silhouettes[i] > 127;
+      const double both = cv::countNonZero(truth_in & key_in), any = cv::countNonZero(truth_in | key_in);
+      if (any > 0) iou_.push_back(both / any);
+    }
+    carving::Silhouettes sil{s.silhouettes, s.dropped};
+    const carving::VisualHull hull = exact_->carve(sil);
+    const cv::Mat exact = exact_->depth(hull, s.main, s.main_key.silhouette);
+    for (int v = 0; v < exact.rows; ++v) {
+      const float* e = exact.ptr<float>(v);
+      const float* d = s.main_depth.ptr<float>(v);
+      for (int u = 0; u < exact.cols; ++u) {
+        if (std::isfinite(e[u]) != std::isfinite(d[u])) ++depth_mismatch_px_;
+        else if (std::isfinite(e[u])) depth_err_mm_.push_back(1000.0 * std::abs(d[u] - e[u]));
+      }
+    }
+    const fs::path comp = truth / "composite" / stem, main_mask = truth / "masks" / loop_.mainCamera() / stem;
+    if (fs::exists(comp) && fs::exists(main_mask))
+      psnr_.push_back(composite::actorPsnr(s.composite.bgr, readImage(comp, 1 /* colour */),
+                                           readImage(main_mask, 0)).psnr_db);
+  }
+
+  std::optional<nlohmann::json> summary() const {
+    if (!exact_ || iou_.empty()) return std::nullopt;
+    auto at = [](std::vector<double> v, double q) {
+      if (v.empty()) return std::nan("");
+      std::sort(v.begin(), v.end());
+      return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
+    };
+    return nlohmann::json{
+        {"witness_iou_min", at(iou_, 0)}, {"witness_iou_median", at(iou_, 0.5)},
+        {"depth_vs_exact_hull_mm_median", at(depth_err_mm_, 0.5)},
+        {"depth_vs_exact_hull_mm_p95", at(depth_err_mm_, 0.95)},
+        {"depth_vs_exact_hull_px", depth_err_mm_.size()}, {"depth_vs_exact_hull_mismatch_px", depth_mismatch_px_},
+        {"composite_actor_psnr_db_min", at(psnr_, 0)}, {"composite_actor_psnr_db_median", at(psnr_, 0.5)}};
+  }
+
+ private:
+  fs::path take_dir_;
+  const FrameLoop& loop_;
+  std::unique_ptr<carving::Carver> exact_;
+  std::vector<double> iou_, depth_err_mm_, psnr_;
+  long long depth_mismatch_px_ = 0;
+};
+
 int runBench(const BenchArgs& a) {
   const fs::path take_dir = a.take.empty() ? defaultBenchTake(a.out, a.frames, a.fps, a.noise, "bench run") : fs::path(a.take);
   Loaded l = load(take_dir, a.loop, false);
@@ -455,6 +531,7 @@ int runBench(const BenchArgs& a) {
   std::map<std::string, std::vector<double>> ms, cpu;
   std::vector<double> total, total_cpu;
   int prop_frames = 0, prop_full_frames = 0;
+  BenchQuality quality(take_dir, *l.loop);
   std::vector<std::string> order = l.loop->stages();
   for (int r = 0; r < a.repeats; ++r) {
     for (const FrameState& in : inputs) {
@@ -470,6 +547,7 @@ int runBench(const BenchArgs& a) {
         ++prop_frames;
         prop_full_frames += s.props->full_frame ? 1 : 0;
       }
+      if (r == 0) quality.add(s);  // after the timed stages
       total.push_back(sum);
       total_cpu.push_back(sum_cpu);
     }
@@ -513,7 +591,13 @@ int runBench(const BenchArgs& a) {
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
-                      {"witness_bin", a.loop.witness_bin}};
+                      {"witness_bin", a.loop.witness_bin},
+                      // Frames are not overlapped: a frame's composite is out when its stages are done.
+                      {"latency_ms", t}};
+  if (const std::optional<nlohmann::json> q = quality.summary()) {
+    j["quality"] = *q;
+    std::fprintf(stderr, "bench run: quality against the truth: %s\n", q->dump().c_str());
+  }
   // The plates' sensor noise, as the take records it (synthetic takes): the keyer's work grows with it.
   if (fs::exists(take_dir / "take.json")) {
     const std::optional<double> noise = takeNoiseSigma(readJsonFile(take_dir / "take.json"));

@@ -386,6 +386,7 @@ struct BenchArgs {
   int repeats = 5;
   double fps = 0.5;  // default studio: frames 2 s apart over the choreography
   double noise = 2.0;  // default studio: sensor noise, grey levels (a camera's plate is never clean)
+  std::string scaling;  // "1,2,4": the loop timed again at each thread count
   LoopArgs loop;
   bool json = false;
 };
@@ -513,7 +514,25 @@ class BenchQuality {
   long long depth_mismatch_px_ = 0;
 };
 
+// Thread counts of --scaling ("1,2,4"); throws Error naming the flag.
+std::vector<int> parseScaling(const std::string& text) {
+  std::vector<int> counts;
+  for (const std::string& item : splitList(text)) {
+    try {
+      size_t used = 0;
+      const int n = std::stoi(item, &used);
+      if (used != item.size() || n < 1 || n > 1024) throw std::invalid_argument(item);
+      counts.push_back(n);
+    } catch (const std::exception&) {
+      throw Error("bench run: thread counts are integers in [1, 1024], comma-separated (got '" + text + "')",
+                  fieldContext("--scaling"));
+    }
+  }
+  return counts;
+}
+
 int runBench(const BenchArgs& a) {
+  const std::vector<int> scaling = parseScaling(a.scaling);
   const fs::path take_dir = a.take.empty() ? defaultBenchTake(a.out, a.frames, a.fps, a.noise, "bench run") : fs::path(a.take);
   Loaded l = load(take_dir, a.loop, false);
   std::vector<int> frames = l.take->frames();
@@ -594,6 +613,37 @@ int runBench(const BenchArgs& a) {
                       {"witness_bin", a.loop.witness_bin},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
                       {"latency_ms", t}};
+  // The same frames at each thread count of --scaling, a loop built for each (warmed up first).
+  if (!scaling.empty()) {
+    nlohmann::json rows = nlohmann::json::array();
+    double ms_at_1 = 0;
+    for (const int n : scaling) {
+      LoopArgs la = a.loop;
+      la.threads = n;
+      Loaded ln = load(take_dir, la, false);
+      { FrameState s = inputs[0]; ln.loop->run(s); }
+      std::vector<double> wall, cpu_ms;
+      for (int r = 0; r < a.repeats; ++r)
+        for (const FrameState& in : inputs) {
+          FrameState s = in;
+          double sum = 0, sum_cpu = 0;
+          for (const StageTime& st : ln.loop->run(s)) {
+            sum += st.ms;
+            sum_cpu += st.cpu_ms;
+          }
+          wall.push_back(sum);
+          cpu_ms.push_back(sum_cpu);
+        }
+      const double m = median(wall);
+      if (n == 1) ms_at_1 = m;
+      rows.push_back({{"threads", n}, {"ms", m}, {"cpu_ms", median(cpu_ms)}, {"fps", 1000.0 / m}});
+      std::fprintf(stderr, "bench run: %d thread%s: %.2f ms a frame (%.1f fps), %.2f ms CPU\n", n, n == 1 ? "" : "s", m,
+                   1000.0 / m, median(cpu_ms));
+    }
+    if (ms_at_1 > 0)
+      for (nlohmann::json& row : rows) row["speedup"] = ms_at_1 / row["ms"].get<double>();
+    j["scaling"] = rows;
+  }
   if (const std::optional<nlohmann::json> q = quality.summary()) {
     j["quality"] = *q;
     std::fprintf(stderr, "bench run: quality against the truth: %s\n", q->dump().c_str());
@@ -758,6 +808,9 @@ Runner addBenchCommand(CLI::App& app) {
                   "Default studio: sensor noise it is rendered with, grey levels (sigma; 0: noise-free plates, which "
                   "the keyer decides almost everywhere on its fast path)")
       ->capture_default_str();
+  cmd->add_option("--scaling", a->scaling,
+                  "Also time the loop at each of these thread counts (1,2,4,...: \"scaling\" in the JSON, with the "
+                  "speedup over 1 thread when 1 is among them)");
   addLoopOptions(cmd, a->loop, false);
   cmd->add_flag("--json", a->json, "JSON on stdout (always written; kept for uniformity)");
   auto bt = std::make_shared<BenchTakeArgs>();

@@ -84,7 +84,7 @@ for f in 000000 000001 000002; do cmp -s "$tmp/run/composite/$f.png" "$tmp/comp/
 python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['command']=='composite' and j['actor_px'] > 1000 and j['fallback_px'] < 0.01 * j['actor_px'], j" "$tmp/comp.json" \
   && ok "composite JSON" || fail "composite JSON"
 
-if "$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 > "$tmp/bench.json" 2> "$tmp/bench.err" && python3 - "$tmp/bench.json" "$take/take.json" <<'PY'
+if "$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 --scaling 1,2 > "$tmp/bench.json" 2> "$tmp/bench.err" && python3 - "$tmp/bench.json" "$take/take.json" <<'PY'
 import json, sys
 j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
 assert j["stage"] == "run" and j["ms"] > 0 and j["fps"] > 0 and j["target_ms"] == 20, j
@@ -102,6 +102,9 @@ assert q["witness_iou_min"] >= 0.95 and q["witness_iou_median"] >= 0.975, q
 assert q["depth_vs_exact_hull_mm_p95"] <= 0.5 and q["depth_vs_exact_hull_px"] > 1000, q
 assert q["depth_vs_exact_hull_mismatch_px"] <= 0.01 * q["depth_vs_exact_hull_px"], q
 assert q["composite_actor_psnr_db_min"] >= 29.0, q
+assert [r["threads"] for r in j["scaling"]] == [1, 2], j
+assert all(r["ms"] > 0 and r["cpu_ms"] > 0 and r["fps"] > 0 and r["speedup"] > 0 for r in j["scaling"]), j
+assert j["scaling"][0]["speedup"] == 1, j
 PY
 then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
 
@@ -111,6 +114,7 @@ expect_fail "frames outside the take name the flag" "--frames" "$bin" run --take
 expect_fail "bad --witness-bin names the field" "witness_bin" "$bin" run --take "$take" --out "$tmp/o" --witness-bin 0 --quiet
 expect_fail "bench run: a bad --fps names the flag" "--fps" "$bin" bench run --out "$tmp/bench_out" --fps 0
 expect_fail "bench run: a bad --noise names the flag" "--noise" "$bin" bench run --out "$tmp/bench_out" --noise -1
+expect_fail "bench run: a bad --scaling names the flag" "--scaling" "$bin" bench run --out "$tmp/bench_out" --scaling 1,two
 cp -r "$take" "$tmp/take_nocg"; rm "$tmp/take_nocg/cg/depth/000001.exr"
 expect_fail "missing CG depth names the file and frame" "cg/depth/000001.exr.*frame 1|frame 1.*cg/depth/000001.exr" \
   "$bin" run --take "$tmp/take_nocg" --out "$tmp/o" --voxel 0.02 --quiet

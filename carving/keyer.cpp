@@ -388,10 +388,28 @@ void classifyRows(const cv::Mat& bgr8, const ClassifyParams& p, int y0, int y1, 
         c[x] = d <= p.plate_tolerance ? kGarbage : d >= 2 * p.plate_tolerance ? kFg : kUnknown;
         continue;
       }
-      const int likeness = p.use_garbage_model ? garbageLikeness(sm.garbage, lut[r8], lut[g8], lut[b8]) : 0;
+      int likeness = p.use_garbage_model ? garbageLikeness(sm.garbage, lut[r8], lut[g8], lut[b8]) : 0;
       if (likeness == 1) {
-        c[x] = kUnknown;
-        continue;
+        // Near the surroundings' colour: sensor noise on dark drapes throws a fifth of their
+        // pixels out of the colour's tolerance (a dark pixel's chroma is noisy). Their 3 x 3
+        // mean (a third of the noise) says whether they are the surroundings; an actor's edge
+        // over them mixes its own colour in and stays unknown, for the two-colour alpha.
+        float mr = 0, mg = 0, mb = 0;
+        int n = 0;
+        for (int yy = std::max(0, y - 1); yy <= std::min(H - 1, y + 1); ++yy) {
+          const std::uint8_t* q = bgr8.ptr<std::uint8_t>(yy);
+          for (int xx = std::max(0, x - 1); xx <= std::min(W - 1, x + 1); ++xx) {
+            mb += lut[q[3 * xx]];
+            mg += lut[q[3 * xx + 1]];
+            mr += lut[q[3 * xx + 2]];
+            ++n;
+          }
+        }
+        if (garbageLikeness(sm.garbage, mr / n, mg / n, mb / n) != 2) {
+          c[x] = kUnknown;
+          continue;
+        }
+        likeness = 2;
       }
       if (likeness == 2) {
         if (mem != nullptr && mem[x]) {

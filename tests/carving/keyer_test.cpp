@@ -333,8 +333,9 @@ TEST(KeyerStudio, NoScreenSetKeyedByDifferenceAgainstTheCleanPlate) {
 // as the default take is keyed) rendered with Gaussian noise of 2 grey levels keys nearly as
 // well as the noise-free render, and the noise adds no silhouette and almost no alpha away from
 // the actor (more than 3 px from the true foreground). Measured: IoU 0 to 0.0012 below the
-// noise-free key's; alpha > 0 added on 1.7e-5 of the pixels away from the actor (5.2e-5 when lone
-// unknown pixels are not taken for noise).
+// noise-free key's; alpha > 0 added on 9.9e-7 of the pixels away from the actor (1.7e-5 before
+// pixels near the drapes' colour were decided by their 3 x 3 mean, 5.2e-5 when lone unknown
+// pixels are not taken for noise either).
 TEST(KeyerStudio, SensorNoiseCostsTheSilhouettesLittle) {
   const Studio s;
   const double t = 5.5;
@@ -368,7 +369,9 @@ TEST(KeyerStudio, SensorNoiseCostsTheSilhouettesLittle) {
   std::printf("alpha > 0 away from the actor: %lld of %lld px (%.1e); lone unknown px %lld\n", stray_alpha,
               far_px, static_cast<double>(stray_alpha) / far_px, lone);
   EXPECT_LE(static_cast<double>(stray_alpha) / far_px, 5e-5);
-  EXPECT_GT(lone, 1000);  // the noise does reach the first pass's unknown class
+  // The noise does reach the first pass's unknown class (929 measured; most noisy pixels near the
+  // drapes' colour are decided by their 3 x 3 mean before that).
+  EXPECT_GT(lone, 500);
 }
 
 // The soft alpha against the exact coverage of each pixel by the actor and prop (the share of

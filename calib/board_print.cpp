@@ -12,7 +12,6 @@
 #include <apriltag/common/image_u8.h>
 #include <apriltag/tag36h11.h>
 #include <opencv2/aruco.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
@@ -176,7 +175,7 @@ void putBigEndian(std::string& out, std::uint32_t v) {
 }
 
 // Inserts a pHYs chunk (pixels per metre, unit = metre) right after IHDR.
-std::string withPhys(const std::vector<std::uint8_t>& png, double px_per_m) {
+std::string withPhys(const std::string& png, double px_per_m) {
   constexpr size_t kAfterIhdr = 8 + 4 + 4 + 13 + 4;  // signature + IHDR (length, type, data, CRC)
   if (png.size() < kAfterIhdr) throw Error("board: PNG encoder returned too few bytes");
   const auto ppm = static_cast<std::uint32_t>(std::lround(px_per_m));
@@ -189,10 +188,7 @@ std::string withPhys(const std::vector<std::uint8_t>& png, double px_per_m) {
   chunk += chunk_body;
   putBigEndian(chunk,
                crc32(reinterpret_cast<const std::uint8_t*>(chunk_body.data()), chunk_body.size()));
-  std::string out(png.begin(), png.begin() + kAfterIhdr);
-  out += chunk;
-  out.append(png.begin() + kAfterIhdr, png.end());
-  return out;
+  return png.substr(0, kAfterIhdr) + chunk + png.substr(kAfterIhdr);
 }
 
 std::string mm(double metres) {
@@ -267,13 +263,7 @@ PrintedBoard printBoard(const BoardSpec& spec, double dpi, const std::filesystem
 
   const cv::Mat img = drawBoard(spec, px_per_m);
   out.png_size = img.size();
-  std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png)) {
-    ErrorContext context;
-    context.file = out.png.string();
-    throw Error("board: cannot encode the PNG", context);
-  }
-  writeFileAtomic(out.png, withPhys(png, px_per_m));
+  writeFileAtomic(out.png, withPhys(encodeImage(out.png, img), px_per_m));
 
   std::ostringstream svg;
   svg << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"

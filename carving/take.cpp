@@ -134,10 +134,11 @@ Take::Take(const TakeSource& source) : source_(source) {
         for (int f : frames_) {
           const fs::path p = maskPath(name, f);
           if (!fs::is_regular_file(p, ec)) continue;
-          const cv::Mat first = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
-          if (!first.empty()) {
-            size = first.size();
+          try {
+            size = readImage(p).size();
             break;
+          } catch (const Error&) {
+            // Not readable: the next frame's mask may be.
           }
         }
       }

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -23,9 +24,11 @@
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfTimeCodeAttribute.h>
-#include <opencv2/imgcodecs.hpp>
 
+#include "core/detail/image_codecs.h"
+#include "core/detail/imgcodecs_plugin.h"
 #include "core/error.h"
+#include "core/plugin.h"
 
 namespace fs = std::filesystem;
 
@@ -48,6 +51,11 @@ std::vector<std::string> splitNames(const std::string& s) {
   std::istringstream in(s);
   while (std::getline(in, item, ',')) out.push_back(item);
   return out;
+}
+
+const detail::ImgcodecsPlugin& imgcodecs() {
+  return pluginInterface<detail::ImgcodecsPlugin>("previz_imgcodecs", "previz_imgcodecs_plugin",
+                                                  "image formats other than PNG, JPEG and EXR: OpenCV's imgcodecs");
 }
 
 }  // namespace
@@ -105,19 +113,30 @@ void writeJsonAtomic(const fs::path& path, const nlohmann::json& j, int indent) 
   writeFileAtomic(path, j.dump(indent) + "\n");
 }
 
-void writeImageAtomic(const fs::path& path, const cv::Mat& image) {
+std::string encodeImage(const fs::path& path, const cv::Mat& image) {
   if (image.empty()) throw Error("cannot write an empty image", fileContext(path));
   const std::string ext = path.extension().string();
   if (ext.empty()) throw Error("no file extension to choose the image format", fileContext(path));
-  std::vector<uchar> buf;
+  try {
+    if (std::optional<std::string> bytes = detail::encodeImage(ext, image)) return std::move(*bytes);
+  } catch (const Error& e) {
+    throw Error("cannot encode image as '" + ext + "': " + e.message(), fileContext(path));
+  }
+  std::vector<unsigned char> buf;
   bool ok = false;
   try {
-    ok = cv::imencode(ext, image, buf);
+    ok = imgcodecs().encode(ext, image, buf);
+  } catch (const Error& e) {
+    throw Error("cannot encode image as '" + ext + "': " + e.message(), fileContext(path));
   } catch (const cv::Exception& e) {
     throw Error("cannot encode image as '" + ext + "': " + e.what(), fileContext(path));
   }
   if (!ok) throw Error("cannot encode image as '" + ext + "'", fileContext(path));
-  writeFileAtomic(path, std::string(buf.begin(), buf.end()));
+  return std::string(buf.begin(), buf.end());
+}
+
+void writeImageAtomic(const fs::path& path, const cv::Mat& image) {
+  writeFileAtomic(path, encodeImage(path, image));
 }
 
 std::string readTextFile(const fs::path& path) {
@@ -145,14 +164,21 @@ cv::Mat readImage(const fs::path& path, int flags) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error("image file does not exist", fileContext(path));
   if (fs::is_directory(path, ec)) throw Error("is a folder, expected an image file", fileContext(path));
+  const std::string unreadable = "not a readable image (corrupt, truncated or unsupported format)";
+  try {
+    if (std::optional<cv::Mat> image = detail::decodeImage(readTextFile(path), flags)) return std::move(*image);
+  } catch (const Error& e) {
+    throw Error(unreadable + ": " + e.message(), fileContext(path));
+  }
   cv::Mat image;
   try {
-    image = cv::imread(path.string(), flags);
+    image = imgcodecs().read(path.string(), flags);
+  } catch (const Error& e) {
+    throw Error(unreadable + ": " + e.message(), fileContext(path));
   } catch (const cv::Exception& e) {
     throw Error(std::string("cannot decode image: ") + e.what(), fileContext(path));
   }
-  if (image.empty())
-    throw Error("not a readable image (corrupt, truncated or unsupported format)", fileContext(path));
+  if (image.empty()) throw Error(unreadable, fileContext(path));
   return image;
 }
 

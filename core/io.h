@@ -14,12 +14,17 @@ namespace previz {
 // folders. Throws Error naming the file on failure.
 void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
 void writeJsonAtomic(const std::filesystem::path& path, const nlohmann::json& j, int indent = 2);
-// Any format cv::imwrite knows, by extension (.png, .jpg, ...), atomically.
+// Images as cv::imwrite / cv::imread give them, byte for byte. PNG and JPEG go through libpng
+// and libjpeg directly (detail/image_codecs.h); any other format OpenCV knows (.tif, .bmp, ...)
+// through OpenCV's imgcodecs in the previz_imgcodecs plugin, loaded then (core/plugin.h).
+// The bytes cv::imencode gives for path's extension (.png, .jpg, ...); errors name the file.
+std::string encodeImage(const std::filesystem::path& path, const cv::Mat& image);
+// encodeImage written atomically.
 void writeImageAtomic(const std::filesystem::path& path, const cv::Mat& image);
 
 std::string readTextFile(const std::filesystem::path& path);
 nlohmann::json readJsonFile(const std::filesystem::path& path);
-// cv::imread with a clear error (missing file / not an image / empty) naming the file.
+// cv::imread(path, flags) with a clear error (missing file / not an image / empty) naming the file.
 cv::Mat readImage(const std::filesystem::path& path, int flags = -1 /* IMREAD_UNCHANGED */);
 
 // Float EXR images (OpenEXR, uncompressed-or-ZIP, FLOAT channels), written atomically.

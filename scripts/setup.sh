@@ -12,6 +12,7 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libceres-dev libopencv-dev libopencv-contrib-dev libopenexr-dev
   nlohmann-json3-dev libcli11-dev libapriltag-dev libpcl-dev
+  libpng-dev libjpeg-dev   # PNG and JPEG read and written without OpenCV's imgcodecs (core/detail/image_codecs.h)
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev   # video takes: containers, timecode
   libgtest-dev libgmock-dev libbenchmark-dev
   slurm-wlm munge chromium   # batch tests: a loopback Slurm cluster, the summary page in Chromium

@@ -6,10 +6,11 @@
 #include <cstdio>
 
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
+#include "composite/detail/video_plugin.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/plugin.h"
 #include "core/rig.h"
 
 namespace previz::composite {
@@ -115,9 +116,8 @@ void OutputOptions::validate() const {
 
 struct CompositeWriter::Impl {
   OutputOptions options;
-  cv::VideoWriter video;
+  std::unique_ptr<detail::VideoOut> video;  // OpenCV's VideoWriter, in its plugin
   fs::path video_tmp, video_path;
-  bool video_open = false;
   int video_frames = 0;
 };
 
@@ -197,27 +197,26 @@ void CompositeWriter::write(int frame, const CompositeResult& r) {
     writeImageAtomic(o.out / "layers" / "front" / (s + ".png"), frontPreview(r.layer_front));
   }
   if (!impl_->video_tmp.empty()) {
-    if (!impl_->video_open) {
-      const std::string& f = o.fourcc;
-      impl_->video.open(impl_->video_tmp.string(), cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]), o.fps,
-                        r.bgr.size());
-      if (!impl_->video.isOpened()) {
+    if (!impl_->video) {
+      const detail::VideoPlugin& plugin = pluginInterface<detail::VideoPlugin>(
+          "previz_composite_video", "previz_composite_video_plugin", "composite video: OpenCV's videoio");
+      impl_->video = plugin.open(impl_->video_tmp.string(), o.fourcc, o.fps, r.bgr.size());
+      if (!impl_->video) {
         ErrorContext c;
         c.file = impl_->video_path.string();
         c.field = "fourcc";
-        throw Error("cannot open a video writer for codec '" + f + "' (try MJPG with a .avi file)", c);
+        throw Error("cannot open a video writer for codec '" + o.fourcc + "' (try MJPG with a .avi file)", c);
       }
-      impl_->video_open = true;
     }
-    impl_->video.write(r.bgr);
+    impl_->video->write(r.bgr);
     ++impl_->video_frames;
   }
 }
 
 void CompositeWriter::close() {
-  if (!impl_->video_open) return;
-  impl_->video.release();
-  impl_->video_open = false;
+  if (!impl_->video) return;
+  impl_->video->release();
+  impl_->video.reset();
   std::error_code ec;
   fs::rename(impl_->video_tmp, impl_->video_path, ec);
   if (ec) {

@@ -2,7 +2,8 @@
 // The compositor's files: reading the engine's CG frames (cg/color, cg/depth, cg/camera.json of
 // a take) and writing composites, debug layers and video. Layout: docs/formats.md ("Composite
 // output"). Every image is written atomically (core/io.h); the video is written by OpenCV's
-// VideoWriter to a temporary beside the target and renamed when closed.
+// VideoWriter (in the previz_composite_video plugin, composite/detail/video_plugin.h, loaded
+// with the first video frame) to a temporary beside the target and renamed when closed.
 #include <filesystem>
 #include <memory>
 #include <string>

@@ -1,9 +1,8 @@
 // Live cameras (see live.h).
 #include "take/live.h"
 
-#include <opencv2/videoio.hpp>
-
 #include "core/error.h"
+#include "take/detail/video_plugin.h"
 #include "take/take.h"
 
 namespace previz::take {
@@ -13,8 +12,9 @@ std::string liveSource(const std::string& source_text) {
   return source_text.compare(0, prefix.size(), prefix) == 0 ? source_text.substr(prefix.size()) : std::string();
 }
 
+// OpenCV's VideoCapture, in the previz_video plugin (detail/video_plugin.h).
 struct LiveStream::Impl {
-  cv::VideoCapture capture;
+  std::unique_ptr<detail::LiveCapture> capture;
 };
 
 LiveStream::LiveStream(const std::string& camera, const std::string& source)
@@ -23,26 +23,22 @@ LiveStream::LiveStream(const std::string& camera, const std::string& source)
   c.camera = camera;
   c.file = source;
   if (source.empty()) throw Error("live: an empty source", c);
-  // A device index, a GStreamer pipeline, or anything FFmpeg opens (files, rtsp://, udp://, ...).
-  const bool index = source.find_first_not_of("0123456789") == std::string::npos;
-  const bool opened = index ? impl_->capture.open(std::stoi(source))
-                            : impl_->capture.open(source, source.find('!') != std::string::npos ? cv::CAP_GSTREAMER
-                                                                                                : cv::CAP_ANY);
-  if (!opened) throw Error("live: cannot open the source", c);
+  impl_->capture = detail::videoPlugin().open_live(source);
+  if (!impl_->capture) throw Error("live: cannot open the source", c);
 }
 
 LiveStream::~LiveStream() = default;
 
 double LiveStream::fps() const {
-  const double fps = impl_->capture.get(cv::CAP_PROP_FPS);
+  const double fps = impl_->capture->fps();
   return fps > 0 && fps < 1000 ? fps : 0.0;
 }
 
-bool LiveStream::grab() { return impl_->capture.grab(); }
+bool LiveStream::grab() { return impl_->capture->grab(); }
 
 bool LiveStream::read(cv::Mat& bgr) {
   cv::Mat frame;
-  if (!impl_->capture.read(frame) || frame.empty()) return false;
+  if (!impl_->capture->read(frame)) return false;
   bgr = toBgr8(frame, false);  // a capture device's frames are display-referred codes already
   return true;
 }

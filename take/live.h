@@ -1,11 +1,11 @@
 #pragma once
 // A camera read live: a capture device ("0", "/dev/video2"), a network stream (rtsp://, udp://,
 // srt://, http://...), a video file played as if live, or a GStreamer pipeline (text with '!'),
-// opened through OpenCV's VideoCapture. Frames come as the take model gives every image (8-bit
-// sRGB-coded BGR, take/take.h). A take names live cameras in take.json "sources" as
-// "live:<source>"; `previz run` reads them (or --live NAME=SOURCE) through live/inputs.h's
-// LiveReader, which paces them: before each frame every camera is advanced (grab, no decode) to
-// the frame the clock says the cameras are at.
+// opened through OpenCV's VideoCapture (in the previz_video plugin). Frames come as the take
+// model gives every image (8-bit sRGB-coded BGR, take/take.h). A take names live cameras in
+// take.json "sources" as "live:<source>"; `previz run` reads them (or --live NAME=SOURCE) through
+// live/inputs.h's LiveReader, which paces them: before each frame every camera is advanced
+// (grab, no decode) to the frame the clock says the cameras are at.
 #include <memory>
 #include <string>
 

@@ -2,7 +2,9 @@
 // Video files of a take: a writer (FFmpeg's libavcodec / libavformat: lossless FFV1 for the
 // synthetic studio, H.264 and ProRes for what cameras deliver), a probe that reads a
 // container's header and counts its packets without decoding, and a reader that decodes through
-// OpenCV's FFmpeg backend, ahead of the frame asked for, on a worker thread.
+// OpenCV's FFmpeg backend, ahead of the frame asked for, on a worker thread. FFmpeg and OpenCV's
+// videoio are the previz_video plugin's (detail/video_plugin.h), loaded by the first writer,
+// probe or reader; a command that reads no video does not load them.
 // Frames are 0-based, 8-bit BGR (CV_8UC3). Every failure throws previz::Error naming the file.
 #include <filesystem>
 #include <memory>

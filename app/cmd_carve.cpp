@@ -26,6 +26,7 @@ struct CarveArgs {
   int min_views = 2;
   int threads = 0;
   double point_spacing_m = 0;
+  bool no_points = false;
   bool depth_everywhere = false;
   bool refine = false;
   bool json = false;
@@ -64,6 +65,7 @@ int runCarve(const CarveArgs& a) {
   o.refine.threads = a.threads;
   o.photo_hull.refine.threads = a.threads;
   o.points.spacing_m = a.point_spacing_m;
+  o.write_points = !a.no_points;
   o.validate();
 
   const carving::Take take({a.take, a.rig, a.masks, a.main_poses});
@@ -171,6 +173,8 @@ Runner addCarveCommand(CLI::App& app) {
   cmd->add_option("--point-spacing", a->point_spacing_m,
                   "Point cloud: also sample faces this densely, metres (0 = mesh vertices)")
       ->capture_default_str();
+  cmd->add_flag("--no-points", a->no_points,
+                "Write no point cloud (points/): PCL, which the point cloud is written with, is then not loaded");
   cmd->add_option("--threads", a->threads, "OpenMP threads (0 = all cores)")->capture_default_str();
   cmd->add_flag("--json", a->json, "Print a JSON summary on stdout");
   cmd->add_flag("--quiet", a->quiet, "No progress line");

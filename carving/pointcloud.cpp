@@ -1,4 +1,6 @@
-// Surface point clouds with normals through PCL (see pointcloud.h).
+// Surface point clouds with normals (see pointcloud.h). PCL's part is the previz_pointcloud
+// plugin's (detail/pointcloud_plugin.h), loaded only when a cloud is written, read or its
+// normals estimated.
 #include "carving/pointcloud.h"
 
 #include <unistd.h>
@@ -8,15 +10,12 @@
 #include <sstream>
 #include <string>
 
-#include <pcl/features/normal_3d.h>
-#include <pcl/io/pcd_io.h>
-#include <pcl/io/ply_io.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-#include <pcl/search/kdtree.h>
+#include <Eigen/Geometry>
 
+#include "carving/detail/pointcloud_plugin.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/plugin.h"
 
 namespace previz::carving {
 namespace fs = std::filesystem;
@@ -82,41 +81,23 @@ void sampleFaces(const TriangleMesh& mesh, const std::vector<Eigen::Vector3f>& v
   }
 }
 
+const detail::PointCloudPlugin& pcl() {
+  return pluginInterface<detail::PointCloudPlugin>("previz_pointcloud", "previz_pointcloud_plugin",
+                                                   "point clouds: PCL");
+}
+
 // PCA normals over the k nearest points (pcl::NormalEstimation). Unoriented: sign arbitrary.
 std::vector<Eigen::Vector3f> pcaNormals(const std::vector<Eigen::Vector3f>& points, int k) {
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->resize(points.size());
-  for (size_t i = 0; i < points.size(); ++i) (*cloud)[i].getVector3fMap() = points[i];
-  pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> estimator;
-  estimator.setInputCloud(cloud);
-  pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
-  estimator.setSearchMethod(tree);
-  estimator.setKSearch(std::min<int>(k, static_cast<int>(points.size())));
-  pcl::PointCloud<pcl::Normal> normals;
-  estimator.compute(normals);
-  std::vector<Eigen::Vector3f> out(points.size(), Eigen::Vector3f::Zero());
-  for (size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3f n = normals[i].getNormalVector3fMap();
-    if (n.allFinite()) out[i] = n;  // too few neighbours: NaN from PCL -> zero, reported below
-  }
+  std::vector<Eigen::Vector3f> out = pcl().pca_normals(points, k);
+  for (Eigen::Vector3f& n : out)
+    if (!n.allFinite()) n.setZero();  // too few neighbours: NaN from PCL -> zero, reported below
   return out;
 }
 
-pcl::PointCloud<pcl::PointNormal> toPcl(const SurfacePoints& cloud) {
+void checkNormals(const SurfacePoints& cloud) {
   if (cloud.normals.size() != cloud.points.size())
     throw Error("point cloud: " + std::to_string(cloud.points.size()) + " points but " +
                 std::to_string(cloud.normals.size()) + " normals");
-  pcl::PointCloud<pcl::PointNormal> out;
-  out.resize(cloud.points.size());
-  for (size_t i = 0; i < cloud.points.size(); ++i) {
-    out[i].getVector3fMap() = cloud.points[i];
-    out[i].getNormalVector3fMap() = cloud.normals[i];
-    out[i].curvature = 0;
-  }
-  out.width = static_cast<std::uint32_t>(out.size());
-  out.height = 1;
-  out.is_dense = true;
-  return out;
 }
 
 // PCL writes straight to a named file; it goes to a private temporary beside the target, the
@@ -220,8 +201,8 @@ SurfacePoints orientedNormals(const std::vector<Eigen::Vector3f>& points,
 }
 
 void writePointCloudPly(const SurfacePoints& cloud, const fs::path& path) {
-  const pcl::PointCloud<pcl::PointNormal> pc = toPcl(cloud);
-  if (pc.empty()) {
+  checkNormals(cloud);
+  if (cloud.empty()) {
     // PCL refuses to write a cloud without points; an empty hull still gets its file (the
     // header PCL would write, no vertices), so a finished frame always has every output.
     writeFileAtomic(path, std::string("ply\nformat binary_little_endian 1.0\ncomment previz surface "
@@ -232,43 +213,29 @@ void writePointCloudPly(const SurfacePoints& cloud, const fs::path& path) {
     return;
   }
   writeThroughPcl(path, "format ", std::string("comment previz surface points: ") + kFrameNote,
-                  [&](const std::string& file) {
-                    pcl::PLYWriter writer;
-                    return writer.write(file, pc, /*binary=*/true, /*use_camera=*/false);
-                  });
+                  [&](const std::string& file) { return pcl().write_ply(file, cloud); });
 }
 
 void writePointCloudPcd(const SurfacePoints& cloud, const fs::path& path) {
-  const pcl::PointCloud<pcl::PointNormal> pc = toPcl(cloud);
+  checkNormals(cloud);
   writeThroughPcl(path, "# .PCD", std::string("# previz surface points: ") + kFrameNote,
-                  [&](const std::string& file) {
-                    // An empty cloud: PCL refuses binary writes of no points; ASCII is fine.
-                    return pc.empty() ? pcl::io::savePCDFileASCII(file, pc)
-                                      : pcl::io::savePCDFileBinary(file, pc);
-                  });
+                  [&](const std::string& file) { return pcl().write_pcd(file, cloud); });
 }
 
 SurfacePoints readPointCloud(const fs::path& path) {
   if (!fs::exists(path)) throw Error("point cloud: no such file", fileContext(path));
-  pcl::PointCloud<pcl::PointNormal> pc;
   const std::string ext = path.extension().string();
+  SurfacePoints out;
   int rc = -1;
   if (ext == ".pcd" || ext == ".PCD") {
-    rc = pcl::io::loadPCDFile(path.string(), pc);
+    rc = pcl().read_pcd(path.string(), out);
   } else if (ext == ".ply" || ext == ".PLY") {
-    rc = pcl::io::loadPLYFile(path.string(), pc);
+    rc = pcl().read_ply(path.string(), out);
   } else {
     throw Error("point cloud: unknown extension '" + ext + "' (expected .ply or .pcd)",
                 fileContext(path));
   }
   if (rc < 0) throw Error("point cloud: PCL could not read the file", fileContext(path));
-  SurfacePoints out;
-  out.points.reserve(pc.size());
-  out.normals.reserve(pc.size());
-  for (const pcl::PointNormal& p : pc) {
-    out.points.push_back(p.getVector3fMap());
-    out.normals.push_back(p.getNormalVector3fMap());
-  }
   return out;
 }
 

@@ -2,7 +2,8 @@
 // The hull's surface as a point cloud with outward normals, for post (PLY / PCD through PCL).
 // Points come from a TriangleMesh (its vertices, plus samples on its faces when a spacing is
 // asked for) or from any surface point set with an inside test that orients the normals.
-// World frame, metres, z up (docs/conventions.md). PCL stays inside pointcloud.cpp.
+// World frame, metres, z up (docs/conventions.md). PCL stays inside the previz_pointcloud plugin
+// (detail/pointcloud_plugin.h), loaded only when a cloud is written, read or its normals estimated.
 #include <filesystem>
 #include <functional>
 #include <vector>

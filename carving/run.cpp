@@ -519,6 +519,8 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
               {"rig_format", take.rigFormat()},
               {"points", {{"spacing_m", m.options.points.spacing_m},
                           {"estimate_normals", m.options.points.estimate_normals}}}};
+  // Only when off, so that frames carved before the option existed still count as finished.
+  if (!m.options.write_points) m.config["points"]["written"] = false;
   if (m.options.refine_depth) {
     const RefineOptions& r = m.options.refine;
     m.config["refine"] = {{"search_m", r.search_m}, {"step_m", r.step_m}, {"agree", r.agree},
@@ -575,8 +577,10 @@ std::vector<fs::path> CarveJob::outputs(int frame) const {
   }
   paths.push_back(m.path("mesh", frame, ".ply"));
   paths.push_back(m.path("mesh", frame, ".obj"));
-  paths.push_back(m.path("points", frame, ".ply"));
-  paths.push_back(m.path("points", frame, ".pcd"));
+  if (m.options.write_points) {
+    paths.push_back(m.path("points", frame, ".ply"));
+    paths.push_back(m.path("points", frame, ".pcd"));
+  }
   paths.push_back(reportPath(frame));
   return paths;
 }
@@ -648,12 +652,14 @@ FrameReport CarveJob::runFrame(int frame) {
   const Clock::time_point t4 = Clock::now();
   writePly(mesh, m.path("mesh", frame, ".ply"));
   writeObj(mesh, m.path("mesh", frame, ".obj"));
-  const SurfacePoints points = surfacePoints(mesh, m.options.points);
-  writePointCloudPly(points, m.path("points", frame, ".ply"));
-  writePointCloudPcd(points, m.path("points", frame, ".pcd"));
+  if (m.options.write_points) {
+    const SurfacePoints points = surfacePoints(mesh, m.options.points);
+    writePointCloudPly(points, m.path("points", frame, ".ply"));
+    writePointCloudPcd(points, m.path("points", frame, ".pcd"));
+    report.points = static_cast<long long>(points.size());
+  }
   report.mesh_vertices = static_cast<long long>(mesh.vertices.size());
   report.mesh_faces = static_cast<long long>(mesh.faces.size());
-  report.points = static_cast<long long>(points.size());
   report.export_ms = msSince(t4);
   report.total_ms = msSince(t0);
 

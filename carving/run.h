@@ -43,6 +43,9 @@ struct RunOptions {
   HullOptions hull;                // volume, voxel_m, k, threads
   KeyerOptions keyer;
   PointCloudOptions points;
+  // points/: the hull's surface point cloud (PLY + PCD). false: none is written, and PCL (in
+  // its plugin, pointcloud.h) is not loaded.
+  bool write_points = true;
   FrameRange frames;
   Shard shard;
   // Camera the depth map is made for: "" = the rig's camera with role "main"; when the rig has

@@ -22,6 +22,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
 #include "datasets/render.h"
@@ -87,8 +88,12 @@ struct StudioFixture {
             cache_dir / (rc.camera.name + "_" + std::to_string(rc.camera.width) + "x" +
                          std::to_string(rc.camera.height) + "_seed" + std::to_string(config.seed) + ".png");
         if (!cache_dir.empty() && std::filesystem::exists(file)) {
-          stage[static_cast<size_t>(c)] = cv::imread(file.string(), cv::IMREAD_COLOR);
-          if (!stage[static_cast<size_t>(c)].empty()) return;
+          try {
+            stage[static_cast<size_t>(c)] = readImage(file, cv::IMREAD_COLOR);
+            return;
+          } catch (const Error&) {
+            // A damaged cache file: rendered again below.
+          }
         }
         synth::RenderOptions ro;
         ro.truth = false;

@@ -2,7 +2,9 @@
 // track props -> composite (live/frame_loop.h), writing composites, depth, the main camera's and
 // the props' poses and, on request, meshes, debug layers and a video; a progress line with
 // per-stage ms and fps.
-// previz bench run: the same loop on frames held in memory, ms per stage, as JSON.
+// previz bench run: the same loop on frames held in memory, ms per stage, as JSON, with the
+// binary's start-up (shared libraries loaded, `previz --version` ms).
+#include <link.h>
 #include <omp.h>
 
 #include <algorithm>
@@ -23,6 +25,7 @@
 #include "live/inputs.h"
 #include "app/options.h"
 #include "app/progress.h"
+#include "batch/process.h"
 #include "calib/lens_table.h"
 #include "batch/manifest.h"
 #include "carving/run.h"
@@ -396,6 +399,33 @@ double median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
+// Start-up (issue 31): the shared objects this process mapped before any command ran, counted as
+// `ldd previz | wc -l` counts them (every one but the executable: the vDSO and the dynamic
+// loader included). Called first thing: plugins load later, when a command needs them.
+int startupLibraries() {
+  int objects = 0;
+  dl_iterate_phdr([](dl_phdr_info*, size_t, void* count) { return ++*static_cast<int*>(count), 0; }, &objects);
+  return objects - 1;
+}
+
+// The median wall time of `previz --version` (this binary) run 5 times as a child: the price of
+// starting previz at all (loading its libraries), which every command and every batch task pays.
+double versionMs() {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  batch::ProcessSpec spec;
+  spec.argv = {ec ? std::string("/proc/self/exe") : self.string(), "--version"};
+  spec.stdout_path = "/dev/null";
+  std::vector<double> ms;
+  for (int i = 0; i < 5; ++i) {
+    const Clock::time_point t0 = Clock::now();
+    if (const int status = batch::runProcess(spec))
+      throw Error("bench run: `previz --version` exited with " + std::to_string(status), fileContext(spec.argv[0]));
+    ms.push_back(msSince(t0));
+  }
+  return median(ms);
+}
+
 // The sensor noise a synthetic take was rendered with (take.json "options"), if it says.
 std::optional<double> takeNoiseSigma(const nlohmann::json& take) {
   const nlohmann::json options = take.value("options", nlohmann::json::object());
@@ -533,6 +563,8 @@ std::vector<int> parseScaling(const std::string& text) {
 
 int runBench(const BenchArgs& a) {
   const std::vector<int> scaling = parseScaling(a.scaling);
+  const int startup_libraries = startupLibraries();
+  const double version_ms = versionMs();
   const fs::path take_dir = a.take.empty() ? defaultBenchTake(a.out, a.frames, a.fps, a.noise, "bench run") : fs::path(a.take);
   Loaded l = load(take_dir, a.loop, false);
   std::vector<int> frames = l.take->frames();
@@ -602,6 +634,8 @@ int runBench(const BenchArgs& a) {
     std::fprintf(stderr, "bench run: props searched every camera's whole frame on every frame (these frames are further "
                  "apart than the tracker's filter bridges); at camera rate it searches predicted regions: "
                  "bench run --fps 24\n");
+  std::fprintf(stderr, "bench run: start-up: %d shared libraries loaded, `previz --version` %.1f ms (median of 5)\n",
+               startup_libraries, version_ms);
   std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
                "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
                median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));
@@ -612,7 +646,8 @@ int runBench(const BenchArgs& a) {
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
                       {"witness_bin", a.loop.witness_bin},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
-                      {"latency_ms", t}};
+                      {"latency_ms", t},
+                      {"startup", {{"libraries", startup_libraries}, {"version_ms", version_ms}}}};
   // The same frames at each thread count of --scaling, a loop built for each (warmed up first).
   if (!scaling.empty()) {
     nlohmann::json rows = nlohmann::json::array();
@@ -795,7 +830,7 @@ Runner addBenchCommand(CLI::App& app) {
   auto a = std::make_shared<BenchArgs>();
   CLI::App* cmd = bench->add_subcommand(
       "run", "The whole frame loop on frames in memory (default studio: 8 x 1280x720 + 1920x1080): ms per "
-             "stage, total, fps, as JSON on stdout");
+             "stage, total, fps, and previz's start-up (shared libraries loaded, --version ms), as JSON on stdout");
   cmd->add_option("--take", a->take, "Take to run on (default: render the default studio into OUT/take once)");
   cmd->add_option("--out", a->out, "Where the default take is kept")->capture_default_str();
   cmd->add_option("--frames", a->frames, "Frames measured")->capture_default_str();

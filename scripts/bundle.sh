@@ -87,6 +87,21 @@ copy_closure() {
   done < <(ldd "$elf")
 }
 
+# Libraries loaded at run time by name rather than needed: TBB's scalable allocator, which libtbb
+# looks for beside itself (without it TBB falls back to malloc, unlike previz in its build tree).
+companions=("libtbb.so.12 libtbbmalloc.so.2")
+copy_companions() {
+  local pair lib companion from
+  for pair in "${companions[@]}"; do
+    read -r lib companion <<<"$pair"
+    [ -e "$out/lib/$lib" ] && [ ! -e "$out/lib/$companion" ] || continue
+    from="$(dirname "$(ldconfig -p | awk -v l="$lib" '$1 == l {print $NF; exit}')")/$companion"
+    [ -e "$from" ] || continue
+    cp -L "$from" "$out/lib/$companion"
+    copy_closure "$out/lib/$companion"
+  done
+}
+
 cp "$bin" "$out/previz"
 copy_closure "$out/previz"
 for p in "${chosen[@]}"; do
@@ -94,6 +109,7 @@ for p in "${chosen[@]}"; do
   cp "$plugin_dir/$p.so" "$out/lib/$p.so"
   copy_closure "$out/lib/$p.so"
 done
+copy_companions
 
 # ---- checks --------------------------------------------------------------------------------
 bytes=$(du -sb "$out" | awk '{print $1}')

@@ -104,7 +104,8 @@ done
 bad=0; redone=0
 while read -r path t; do
   newt=$(awk -v p="$path" '$1 == p {print $2}' "$tmp/after.txt")
-  frame=$(sed -E 's/.*\/([0-9]{6})\..*/\1/' <<<"$path"); take=${path%%/*}
+  # (a cancelled task may leave an atomic write's hidden temp file, .000002.exr.tmp.*: its frame's)
+  frame=$(sed -E 's/.*\/\.?([0-9]{6})\..*/\1/' <<<"$path"); take=${path%%/*}
   if [ "$take/$frame" = "take_a/000000" ]; then
     [ "$newt" != "$t" ] && redone=$((redone + 1))
   elif [[ " $cancel_frames " == *" $take/$frame "* ]]; then :

@@ -473,10 +473,11 @@ fs::path defaultBenchTake(const std::string& out, int frame_count, double fps, d
 }
 
 // How good the frames bench run times are, against the synthetic take's truth (truth/labels:
-// the keyer's foreground is the actor and the props; truth/masks/main, truth/composite) and the exact hull of the same silhouettes (a 5 mm carve: the live loop
-// carves at 1 cm, docs/formats.md): witness silhouettes' IoU, main-view depth against that
-// hull (mm, where both have depth), composite PSNR over the actor's bounding box. Nothing when
-// the take has no truth (a real take).
+// the keyer's foreground is the actor and the props; truth/masks/main, truth/composite) and
+// the exact hull of the same silhouettes (a 5 mm carve: the live loop carves at 1 cm,
+// docs/formats.md): witness silhouettes' IoU, main-view depth against that hull (mm, where
+// both have depth), composite PSNR over the actor's bounding box. Nothing when the take has no
+// truth (a real take).
 class BenchQuality {
  public:
   BenchQuality(const fs::path& take_dir, const FrameLoop& loop) : take_dir_(take_dir), loop_(loop) {

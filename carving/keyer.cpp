@@ -562,7 +562,7 @@ struct DifferenceFrame {
   int tolerance = 0;                          // levels: equal to the plate within noise
   float sigma_frame = 0, sigma_plate = 0;     // estimated sensor noise, grey levels
   float min_shadow = 0.4f;
-  float hue_levels = 2;                       // a shadow's mean residual allowed beyond noise
+  float hue_levels = 3;                       // KeyerOptions::shadow_hue_levels
 };
 
 DifferenceFrame differenceFrame(const cv::Mat& bgr8, const ScreenModel& sm, const KeyerOptions& o) {

@@ -198,7 +198,8 @@ class Keyer {
 // it; where alpha = 0, F is C with green limited to max(R, B) (it is never seen).
 cv::Mat despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen,
                 const KeyerOptions& options = {});
-// The same into 'out', reused when it has the frame's size and type (see Keyer::key).
+// The same into 'out', reused when it has the frame's size and type (see Keyer::key); 'out'
+// must not share the frame's pixels (neighbours are read while it is written).
 void despill(const cv::Mat& bgr8, const KeyResult& key, const ScreenModel& screen, const KeyerOptions& options,
              cv::Mat& out);
 

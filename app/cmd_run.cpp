@@ -78,6 +78,7 @@ struct LoopArgs {
   double cg_gain = 1.0;
   int threads = 0;
   int witness_bin = 1;
+  int key_region_margin_px = live::FrameLoopOptions{}.key_region_margin_px;
   std::string props;
   bool no_props = false;
 };
@@ -104,6 +105,10 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--witness-bin", a.witness_bin,
                   "Key and carve the witnesses at 1/N resolution (plates averaged over N x N pixels): faster, a "
                   "little less silhouette detail; the main camera stays at full resolution")
+      ->capture_default_str();
+  cmd->add_option("--key-region-margin", a.key_region_margin_px,
+                  "Key each witness only around its last frame's silhouette, grown by this many pixels (whole frames "
+                  "when something shows outside it, and in turn every 24 frames); 0 = key every frame whole")
       ->capture_default_str();
   cmd->add_option("--props", a.props,
                   "props.json of the tagged props to track (stage \"props\"; default: the take's props.json when it "
@@ -161,6 +166,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   o.composite.cg_gain = a.cg_gain;
   o.threads = a.threads;
   o.witness_bin = a.witness_bin;
+  o.key_region_margin_px = a.key_region_margin_px;
   o.debug_layers = debug_layers;
   Rig rig = l.take->rig();
   TakeInputOptions io;
@@ -646,6 +652,7 @@ int runBench(const BenchArgs& a) {
                       {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
                       {"witness_bin", a.loop.witness_bin},
+                      {"key_region_margin_px", a.loop.key_region_margin_px},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
                       {"latency_ms", t},
                       {"startup", {{"libraries", startup_libraries}, {"version_ms", version_ms}}}};

@@ -64,6 +64,11 @@ constexpr float kAmbiguousAlpha = 0.2f;
 constexpr float kClearAlpha = 0.15f;
 // Rows per parallel band of the first two passes.
 constexpr int kBandRows = 16;
+// Region keying: every 8th row outside the region is probed; 3 clear foreground pixels in a row
+// there are something new (sensor noise at 4 sigma past the screen's chroma band does not line
+// up three in a row).
+constexpr int kRegionProbeRows = 8;
+constexpr int kRegionProbeRun = 3;
 
 [[noreturn]] void fail(const std::string& message, const std::string& source) {
   ErrorContext context;
@@ -992,6 +997,15 @@ void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeySt
 
 }  // namespace
 
+// One frame's constants, shared by the regions keyed in it (Keyer::key).
+struct Keyer::Frame {
+  const cv::Mat* bgr8 = nullptr;  // the whole frame, working order
+  ClassifyTables tables;
+  ClassifyParams params;          // whole-frame images (memory)
+  bool difference = false;        // no screen: difference keying with 'diff'
+  DifferenceFrame diff;
+};
+
 void KeyerOptions::validate() const {
   auto bad = [](const std::string& field, const std::string& what) {
     ErrorContext context;
@@ -1013,6 +1027,9 @@ void KeyerOptions::validate() const {
   if (!(shadow_hue_levels >= 0 && shadow_hue_levels <= 64))
     bad("shadow_hue_levels", "must be in [0, 64] (got " + str(shadow_hue_levels) + ")");
   if (threads < 0) bad("threads", "must be >= 0 (got " + str(threads) + ")");
+  if (region_margin_px < 0) bad("region_margin_px", "must be >= 0 (got " + str(region_margin_px) + ")");
+  if (region_full_every < 0) bad("region_full_every", "must be >= 0 (got " + str(region_full_every) + ")");
+  if (region_full_phase < 0) bad("region_full_phase", "must be >= 0 (got " + str(region_full_phase) + ")");
 }
 
 const char* toString(Backdrop backdrop) {
@@ -1164,50 +1181,158 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
     screen_ = std::move(sm);
     has_screen_ = true;
   }
+  const int W = bgr8.cols, H = bgr8.rows;
+  // The frame's constants, from the whole frame whatever region is keyed: the surroundings'
+  // colour (the image border), the exposure and noise (a sparse grid).
+  Frame f;
+  f.bgr8 = &bgr8;
+  f.tables = makeTables(screen_);
+  f.params.tables = &f.tables;
+  f.params.screen = &screen_;
+  f.params.use_plate = screen_.from_clean_plate;
+  f.params.plate_tolerance = options_.plate_tolerance;
+  if (!f.params.use_plate && options_.garbage_matte) {
+    screen_.garbage = estimateGarbage(bgr8, f.tables);
+    f.params.use_garbage_model = screen_.garbage.valid;
+    if (f.params.use_garbage_model && options_.remember_garbage_zone) {
+      if (garbage_memory_.size() != bgr8.size()) garbage_memory_ = cv::Mat::zeros(bgr8.size(), CV_8UC1);
+      f.params.memory = &garbage_memory_;
+    }
+  }
+  f.difference = screen_.backdrop == Backdrop::kNone;
+  if (f.difference) {
+    f.diff = differenceFrame(bgr8, screen_, options_);
+    screen_.exposure_gain = f.diff.gain;
+  }
+  classes_.create(H, W, CV_8UC1);
+  alpha8_.create(H, W, CV_8UC1);
+  if (f.difference) shadow_residual_.create(H, W, CV_8SC4);
+  result.silhouette.create(H, W, CV_8UC1);
+
+  // Region keying (KeyerOptions::region_margin_px): the box around the last silhouette, unless
+  // a whole frame is due or something new shows outside it.
+  const cv::Rect whole(0, 0, W, H);
+  const char* full_reason = nullptr;
+  if (options_.region_margin_px <= 0) full_reason = "regions off";
+  else if (region_.empty()) full_reason = "no earlier silhouette";
+  else if (region_.br().x > W || region_.br().y > H) full_reason = "frame size changed";
+  else if (options_.region_full_every > 0 &&
+           (frames_keyed_ + options_.region_full_phase) % options_.region_full_every == 0)
+    full_reason = "periodic whole frame";
+  else if (foregroundOutside(f, region_)) full_reason = "foreground outside the region";
+  if (full_reason == nullptr) {
+    result.silhouette.setTo(0);
+    alpha8_.setTo(0);
+    keyRegion(f, region_, result);
+    if (reachesEdge(result.silhouette, region_)) full_reason = "silhouette reached the region's edge";
+  }
+  if (full_reason != nullptr) keyRegion(f, whole, result);
+  ++frames_keyed_;
+  result.stats.whole_frame = full_reason != nullptr;
+  result.stats.whole_frame_reason = full_reason != nullptr ? full_reason : "";
+  // The next frame's region: this silhouette's box, grown by the margin (none when empty: the
+  // next frame is keyed whole, which also finds an actor walking in).
+  if (options_.region_margin_px > 0) {
+    const cv::Rect box = cv::boundingRect(result.silhouette);
+    const int m = options_.region_margin_px;
+    region_ = box.empty() ? cv::Rect() : (cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & whole);
+  }
+  if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
+  else result.alpha.release();
+}
+
+void Keyer::resetRegion() { region_ = cv::Rect(); }
+
+bool Keyer::foregroundOutside(const Frame& f, const cv::Rect& region) {
+  // Every kRegionProbeRows-th row classified whole (the first pass alone, no flood, so
+  // garbage-like pixels do not count): a run of clear foreground outside the region is
+  // something new (an actor walking in, a prop put down). Smaller than the row step, or the
+  // surroundings' own colour, it is found by the periodic whole frame.
+  const cv::Mat& bgr8 = *f.bgr8;
+  const int W = bgr8.cols, H = bgr8.rows;
+  std::vector<cv::Point> seeds;
+  for (int y = kRegionProbeRows / 2; y < H; y += kRegionProbeRows) {
+    if (f.difference)
+      differenceRows(bgr8, screen_.plate, f.diff, y, y + 1, classes_, shadow_residual_);
+    else
+      classifyRows(bgr8, f.params, y, y + 1, classes_, seeds);
+    const std::uint8_t* c = classes_.ptr<std::uint8_t>(y);
+    const bool in_rows = y >= region.y && y < region.br().y;
+    int run = 0;
+    for (int x = 0; x < W; ++x) {
+      if (in_rows && x == region.x) {
+        x = region.br().x - 1;
+        run = 0;
+        continue;
+      }
+      run = c[x] == kFg ? run + 1 : 0;
+      if (run >= kRegionProbeRun) return true;
+    }
+  }
+  return false;
+}
+
+bool Keyer::reachesEdge(const cv::Mat& silhouette, const cv::Rect& region) {
+  // Foreground on the region's edge (where that is not the image's): the silhouette may go on
+  // outside it.
+  const int W = silhouette.cols, H = silhouette.rows;
+  auto row_any = [&](int y) {
+    const std::uint8_t* s = silhouette.ptr<std::uint8_t>(y);
+    for (int x = region.x; x < region.br().x; ++x)
+      if (s[x]) return true;
+    return false;
+  };
+  if (region.y > 0 && row_any(region.y)) return true;
+  if (region.br().y < H && row_any(region.br().y - 1)) return true;
+  for (int y = region.y; y < region.br().y; ++y) {
+    const std::uint8_t* s = silhouette.ptr<std::uint8_t>(y);
+    if (region.x > 0 && s[region.x]) return true;
+    if (region.br().x < W && s[region.br().x - 1]) return true;
+  }
+  return false;
+}
+
+void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result) {
+  // The region as images of its own (views: no copy): the frame, the screen model's per-pixel
+  // images, the garbage memory and the scratch. Every pass below reads rows of these views, so
+  // the region's edge is their image edge (the garbage flood starts there too: the region's edge
+  // lies on background, or reachesEdge sends the frame to a whole key).
+  const cv::Mat bgr8 = (*f.bgr8)(r);
+  ScreenModel sm = screen_;
+  for (cv::Mat* m : {&sm.plate, &sm.illumination, &sm.garbage_zone, &sm.plate_green_range})
+    if (!m->empty()) *m = (*m)(r);
+  cv::Mat memory_view;
+  ClassifyParams params = f.params;
+  params.screen = &sm;
+  if (params.memory != nullptr) {
+    memory_view = garbage_memory_(r);
+    params.memory = &memory_view;
+  }
+  cv::Mat cls = classes_(r);
+  cv::Mat alpha8 = alpha8_(r);
+  cv::Mat silhouette = result.silhouette(r);
+  cv::Mat residual = f.difference ? shadow_residual_(r) : cv::Mat();
   const int threads = threadCount(options_.threads);
   const int W = bgr8.cols, H = bgr8.rows;
-  const bool use_plate = screen_.from_clean_plate;
+  const bool use_plate = sm.from_clean_plate;
   const int bands = (H + kBandRows - 1) / kBandRows;
   band_refined_.resize(bands);
   band_seeds_.resize(bands);
 
-  const ClassifyTables tables = makeTables(screen_);
-  ClassifyParams params;
-  params.tables = &tables;
-  params.screen = &screen_;
-  params.use_plate = use_plate;
-  params.plate_tolerance = options_.plate_tolerance;
-  if (!use_plate && options_.garbage_matte) {
-    screen_.garbage = estimateGarbage(bgr8, tables);
-    params.use_garbage_model = screen_.garbage.valid;
-    if (params.use_garbage_model && options_.remember_garbage_zone) {
-      if (garbage_memory_.size() != bgr8.size()) garbage_memory_ = cv::Mat::zeros(bgr8.size(), CV_8UC1);
-      params.memory = &garbage_memory_;
-    }
-  }
-
   // Pass 1: classes.
-  classes_.create(H, W, CV_8UC1);
-  cv::Mat& cls = classes_;
   int shadows = 0;
-  if (screen_.backdrop == Backdrop::kNone) {
-    const DifferenceFrame diff = differenceFrame(bgr8, screen_, options_);
-    screen_.exposure_gain = diff.gain;
-    shadow_residual_.create(H, W, CV_8SC4);
+  if (f.difference) {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
     for (int band = 0; band < bands; ++band)
-      differenceRows(bgr8, screen_.plate, diff, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
-                     shadow_residual_);
+      differenceRows(bgr8, sm.plate, f.diff, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls, residual);
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : shadows)
     for (int band = 0; band < bands; ++band)
-      shadows += shadowNeighbourhood(shadow_residual_, diff, band * kBandRows,
-                                     std::min(H, (band + 1) * kBandRows), cls);
+      shadows += shadowNeighbourhood(residual, f.diff, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls);
   } else {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
     for (int band = 0; band < bands; ++band) {
       band_seeds_[band].clear();
-      classifyRows(bgr8, params, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls,
-                   band_seeds_[band]);
+      classifyRows(bgr8, params, band * kBandRows, std::min(H, (band + 1) * kBandRows), cls, band_seeds_[band]);
     }
     if (params.use_garbage_model) {
       std::vector<cv::Point>& stack = band_seeds_[0];
@@ -1217,7 +1342,6 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
       floodGarbage(cls, stack);
     }
   }
-
   band_lone_.resize(bands);
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int band = 0; band < bands; ++band) {
@@ -1231,13 +1355,11 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
   // Pass 2: alpha (8-bit). Background 0, foreground 255; the two-colour alpha for unknown
   // pixels and for pixels with a 4-neighbour on the other side (a background pixel beside the
   // foreground may hold a little of it: a dark costume's edge keeps the screen's chroma).
-  alpha8_.create(H, W, CV_8UC1);
   need_rows_.create(bands, W, CV_8UC1);
   result.stats = {};
-  result.silhouette.create(H, W, CV_8UC1);
   const int radius = options_.edge_radius_px;
   const int threshold8 = static_cast<int>(std::lround(options_.silhouette_threshold * 255.0));
-  cv::Mat* memory = params.memory != nullptr ? &garbage_memory_ : nullptr;
+  cv::Mat* memory = params.memory != nullptr ? &memory_view : nullptr;
   int unknown = 0, garbage = 0;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : unknown, garbage)
   for (int band = 0; band < bands; ++band) {
@@ -1249,8 +1371,8 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
       const std::uint8_t* c = cls.ptr<std::uint8_t>(y);
       const std::uint8_t* up = cls.ptr<std::uint8_t>(std::max(0, y - 1));
       const std::uint8_t* down = cls.ptr<std::uint8_t>(std::min(H - 1, y + 1));
-      std::uint8_t* a = alpha8_.ptr<std::uint8_t>(y);
-      std::uint8_t* s = result.silhouette.ptr<std::uint8_t>(y);
+      std::uint8_t* a = alpha8.ptr<std::uint8_t>(y);
+      std::uint8_t* s = silhouette.ptr<std::uint8_t>(y);
       // Alpha and silhouette from the class, and the pixels at a transition (unknown, or a
       // 4-neighbour on the other side): 16 pixels per SIMD step.
       std::uint8_t* need = need_row;
@@ -1267,7 +1389,7 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
         }
         if (!need[x]) continue;
         ++unknown;
-        const float e = edgeAlpha(bgr8, cls, screen_, use_plate, x, y, radius);
+        const float e = edgeAlpha(bgr8, cls, sm, use_plate, x, y, radius);
         if (e >= 0.0f) {
           a[x] = static_cast<std::uint8_t>(std::lround(e * 255.0f));
         } else if (e == -2.0f && c[x] == kUnknown) {
@@ -1290,14 +1412,14 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int band = 0; band < bands; ++band) {
     for (const cv::Point& p : band_refined_[band]) {
-      const int v = alpha8_.at<std::uint8_t>(p);
+      const int v = alpha8.at<std::uint8_t>(p);
       if (std::abs(v - threshold8) >= ambiguous8 || p.x == 0 || p.y == 0 || p.x + 1 == W ||
           p.y + 1 == H) {
         continue;
       }
       int sum = 0, lo = 255, hi = 0;
       for (int dy = -1; dy <= 1; ++dy) {
-        const std::uint8_t* r = alpha8_.ptr<std::uint8_t>(p.y + dy);
+        const std::uint8_t* r = alpha8.ptr<std::uint8_t>(p.y + dy);
         for (int dx = -1; dx <= 1; ++dx) {
           sum += r[p.x + dx];
           lo = std::min<int>(lo, r[p.x + dx]);
@@ -1305,7 +1427,7 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
         }
       }
       if (lo <= clear8 && hi >= 255 - clear8) {
-        result.silhouette.at<std::uint8_t>(p) = sum >= 9 * threshold8 ? 255 : 0;
+        silhouette.at<std::uint8_t>(p) = sum >= 9 * threshold8 ? 255 : 0;
       }
     }
   }
@@ -1313,9 +1435,7 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
   result.stats.lone_unknown_px = lone;
   result.stats.garbage_px = garbage;
   result.stats.shadow_px = shadows;
-  cleanSilhouette(result.silhouette, alpha8_, options_, result.stats);
-  if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
-  else result.alpha.release();
+  cleanSilhouette(silhouette, alpha8, options_, result.stats);
 }
 
 cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen,

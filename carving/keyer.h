@@ -91,6 +91,20 @@ struct KeyerOptions {
   // fill light shifts a real shadow's hue a little; a costume is off the same way everywhere).
   double shadow_hue_levels = 3;
   int threads = 0;  // OpenMP threads for one key() call (0 = OpenMP's default)
+  // Region keying, for consecutive frames of a live loop (0 = off: every frame keyed whole). The
+  // actor covers 2-5 % of a witness frame and moves a few pixels a frame, so a frame is keyed
+  // only inside the last frame's silhouette box grown by this margin (px); everywhere else is
+  // background. The frame is keyed whole instead (KeyStats::whole_frame says why) when there is
+  // no earlier silhouette, when the silhouette reaches the region's edge (it may go on past it),
+  // when every 8th row probed outside the region shows clear foreground (an actor walking in,
+  // a prop put down; 3 pixels in a row), and every region_full_every frames (what the probe
+  // cannot see: something under 8 rows tall, or of the surroundings' own colour). Call
+  // resetRegion() when frames stop being consecutive (a gap, a seek).
+  int region_margin_px = 0;
+  int region_full_every = 24;  // 0 = never
+  // Which of those frames (frames keyed modulo region_full_every): a loop keying several cameras
+  // staggers them, so that no frame pays for every camera's whole key at once.
+  int region_full_phase = 0;
   void validate() const;  // throws Error naming the field
 };
 
@@ -140,6 +154,10 @@ struct KeyStats {
   int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
   int holes_filled = 0;    // holes filled (smaller than min_hole_px)
   int shadow_px = 0;       // difference keying: pixels taken for shadows on the set
+  // Region keying (KeyerOptions::region_margin_px): false when only the region was keyed; true
+  // with the reason when the whole frame was.
+  bool whole_frame = true;
+  std::string whole_frame_reason;
 };
 
 struct KeyResult {
@@ -169,6 +187,8 @@ class Keyer {
   // buffers: no allocation, no page faults per frame). Whoever still holds result's images
   // from an earlier frame sees them overwritten.
   void key(const cv::Mat& bgr8, const std::string& source, KeyResult& result);
+  // Forgets the last silhouette's region: the next frame is keyed whole.
+  void resetRegion();
   const ScreenModel& screen() const { return screen_; }
   bool hasScreen() const { return has_screen_; }
   const KeyerOptions& options() const { return options_; }
@@ -188,6 +208,13 @@ class Keyer {
   cv::Mat shadow_residual_;  // difference keying: the shadow candidates' residuals
   std::vector<std::vector<cv::Point>> band_refined_, band_seeds_;
   std::vector<std::vector<detail::LonePixel>> band_lone_;
+  // Region keying: the next frame's region (empty: key it whole) and frames since the last whole one.
+  cv::Rect region_;
+  long long frames_keyed_ = 0;
+  struct Frame;
+  void keyRegion(const Frame& f, const cv::Rect& region, KeyResult& result);
+  bool foregroundOutside(const Frame& f, const cv::Rect& region);
+  static bool reachesEdge(const cv::Mat& silhouette, const cv::Rect& region);
 };
 
 // Spill suppression for the main plate (8-bit sRGB BGR in and out), given the frame's key (with

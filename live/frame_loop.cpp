@@ -36,6 +36,9 @@ void FrameLoopOptions::validate() const {
   keyer.validate();
   composite.validate();
   if (threads < 0) throw Error("run: threads must be >= 0", fieldContext("threads"));
+  if (key_region_margin_px < 0)
+    throw Error("run: key_region_margin_px must be >= 0 (got " + std::to_string(key_region_margin_px) + ")",
+                fieldContext("key_region_margin_px"));
   if (witness_bin < 1 || witness_bin > 8)
     throw Error("run: witness_bin must be in [1, 8] (got " + std::to_string(witness_bin) + ")",
                 fieldContext("witness_bin"));
@@ -105,7 +108,9 @@ struct FrameLoop::Impl {
   std::vector<std::pair<std::string, StageFn>> stages;
   composite::CompositeResult result;  // images reused frame after frame
   carving::KeyResult main_key;        // likewise (the main camera's 2 Mpx: no allocation per frame)
+  std::vector<carving::KeyResult> witness_keys;
   cv::Mat foreground;
+  std::optional<int> last_frame;      // the last frame keyed (region keying needs consecutive ones)
 
   int threads() const { return options.threads > 0 ? options.threads : omp_get_max_threads(); }
 
@@ -117,6 +122,10 @@ struct FrameLoop::Impl {
       throw Error("key: expected " + std::to_string(n) + " witness plates (got " +
                   std::to_string(s.witness_plates.size()) + ")");
     std::vector<std::string> errors(n + 1);
+    // A gap or a seek: the last frame's silhouettes say nothing about this one's.
+    if (!last_frame || s.frame != *last_frame + 1)
+      for (carving::Keyer& k : keyers) k.resetRegion();
+    last_frame = s.frame;
     // One item per camera, dynamic scheduling, the largest first: the main camera (index n; 2x
     // a witness's pixels, soft alpha and despill), so that the witnesses fill in around it. No
     // exception leaves the region (STYLE.md rule 11).
@@ -125,12 +134,13 @@ struct FrameLoop::Impl {
       const int i = n - item;
       try {
         if (i < n) {
-          if (!s.dropped[i].empty()) continue;
-          if (s.witness_plates[i].empty()) {
-            s.dropped[i] = "no frame";
+          if (!s.dropped[i].empty() || s.witness_plates[i].empty()) {
+            if (s.dropped[i].empty()) s.dropped[i] = "no frame";
+            keyers[i].resetRegion();
             continue;
           }
-          s.silhouettes[i] = keyers[i].key(witnessPlate(s, i), carve_names[i]).silhouette;
+          keyers[i].key(witnessPlate(s, i), carve_names[i], witness_keys[i]);
+          s.silhouettes[i] = witness_keys[i].silhouette;
         } else {
           keyers[n].key(s.main_plate, main_name, main_key);
           carving::despill(s.main_plate, main_key, keyers[n].screen(), keyers[n].options(), foreground);
@@ -223,6 +233,7 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
   carving::KeyerOptions witness_key = options.keyer;
   witness_key.soft_alpha = false;  // carving needs the silhouette only
   witness_key.threads = 1;         // cameras are keyed in parallel
+  witness_key.region_margin_px = (options.key_region_margin_px + options.witness_bin - 1) / options.witness_bin;
   if (const int bin = options.witness_bin; bin > 1) {
     const int area = bin * bin;
     witness_key.min_blob_px = std::max(1, witness_key.min_blob_px / area);
@@ -234,11 +245,19 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
     }
     m.binned.resize(carve_cams.size());
   }
-  for (size_t i = 0; i < m.carve_names.size(); ++i) m.keyers.emplace_back(witness_key);
+  // Whole frames in turn: witness i's on frames i, i + every, ... (one witness a frame while
+  // there are no more witnesses than 'every', 24 by default).
+  const int every = std::max(1, witness_key.region_full_every);
+  for (size_t i = 0; i < m.carve_names.size(); ++i) {
+    witness_key.region_full_phase = (every - static_cast<int>(i % every)) % every;
+    m.keyers.emplace_back(witness_key);
+  }
+  m.witness_keys.resize(m.carve_names.size());
   carving::KeyerOptions main_key = options.keyer;
   main_key.soft_alpha = true;
   main_key.remember_garbage_zone = false;  // the main camera moves
   main_key.threads = 1;
+  main_key.region_margin_px = 0;  // keyed whole: its soft alpha is what the director sees
   m.keyers.emplace_back(main_key);
   carving::HullOptions hull = options.hull;
   hull.threads = options.threads;

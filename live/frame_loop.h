@@ -72,6 +72,15 @@ struct FrameLoopOptions {
   // The witness keyers' speck / hole sizes (KeyerOptions min_blob_px, min_hole_px, in full
   // pixels) are divided by witness_bin^2.
   int witness_bin = 1;
+  // Witnesses keyed only around their last silhouette (KeyerOptions::region_margin_px): the box
+  // of the last frame's silhouette grown by this many plate pixels (divided by witness_bin),
+  // whole frames when something shows outside it, and one witness's whole frame in turn every
+  // few frames. Carving needs their binary silhouettes only, which region keying gives exactly
+  // (tests/carving/keyer_test.cpp). 0 = every frame keyed whole. Frames that are not
+  // consecutive (FrameState::frame not one past the last) are keyed whole. The main camera is
+  // always keyed whole: its soft alpha is composited, and region keying would leave the alpha of
+  // stray pixels far from the actor at 0.
+  int key_region_margin_px = 48;
   int threads = 0;                          // OpenMP threads (0 = default)
   void validate() const;                    // throws Error naming the field
 };
@@ -88,7 +97,7 @@ struct FrameState {
   RigCamera main;
   composite::CgFrame cg;
   // Stage results.
-  std::vector<cv::Mat> silhouettes;          // carving cameras
+  std::vector<cv::Mat> silhouettes;          // carving cameras (the loop's buffers, shared)
   // The main camera's key and despilled plate: the loop's buffers, shared like 'composite'.
   carving::KeyResult main_key;
   cv::Mat foreground;                        // despilled main plate

@@ -673,11 +673,125 @@ TEST(Keyer, OptionsNameTheBadField) {
   o.shadow_hue_levels = -1;
   EXPECT_EQ(field(o), "shadow_hue_levels");
   o = {};
+  o.region_margin_px = -1;
+  EXPECT_EQ(field(o), "region_margin_px");
+  o = {};
+  o.region_full_every = -1;
+  EXPECT_EQ(field(o), "region_full_every");
+  o = {};
   o.min_hole_px = -3;
   EXPECT_THROW(Keyer{o}, Error);
 }
 
 // OpenMP changes nothing: rows are independent and every reduction is an integer count.
+// Region keying (KeyerOptions::region_margin_px), as the live loop keys: consecutive frames at
+// 24 fps with sensor noise, every witness (no clean plate, the garbage memory on) and the moving
+// main camera (soft alpha), keyed whole and by region. The region keyer must give the whole
+// keyer's silhouette exactly, and its alpha inside the region, while keying only the region
+// after the first frame.
+TEST(KeyerStudio, RegionKeyingMatchesWholeFramesOnConsecutiveFrames) {
+  const Studio s;
+  constexpr int kFrames = 4;
+  long long region_frames = 0, region_px = 0, frame_px = 0, main_differs = 0;
+  const int cameras[] = {0, 3, 5, s.mainIndex()};  // witness01, 04, 06 (the drapes), main
+  for (const int cam : cameras) {
+    const RigCamera& rc = s.rig.cameras[static_cast<size_t>(cam)];
+    KeyerOptions whole_opts;
+    whole_opts.threads = 1;
+    if (rc.role == "main") whole_opts.remember_garbage_zone = false;
+    else whole_opts.soft_alpha = false;
+    KeyerOptions region_opts = whole_opts;
+    region_opts.region_margin_px = 48;
+    Keyer whole(whole_opts), region(region_opts);
+    for (int f = 0; f < kFrames; ++f) {
+      const double t = 5.5 + f / 24.0;
+      const std::string source = rc.camera.name + " frame " + std::to_string(f);
+      const cv::Mat frame = s.render(cam, t, synth::kLayersPlate, false, 2.0).bgr;
+      const KeyResult a = whole.key(frame, source), b = region.key(frame, source);
+      EXPECT_EQ(cv::countNonZero(a.silhouette != b.silhouette), 0) << source;
+      if (rc.role == "main") {
+        // Soft alpha: the same inside the region; outside it the whole key leaves alpha on a few
+        // lone pixels of sensor noise and far-off edges (never silhouette: decided on their 3 x 3
+        // mean), which the region key leaves at 0.
+        const cv::Mat differs = a.alpha != b.alpha;
+        cv::Rect box = cv::boundingRect(b.silhouette);  // within the region (a few px a frame)
+        box = cv::Rect(box.x - 40, box.y - 40, box.width + 80, box.height + 80) & cv::Rect(0, 0, frame.cols, frame.rows);
+        main_differs += cv::countNonZero(differs);
+        if (f > 0) EXPECT_EQ(cv::countNonZero(differs(box)), 0) << source;
+        EXPECT_EQ(cv::countNonZero(differs & a.silhouette), 0) << source;
+        EXPECT_EQ(cv::countNonZero(b.alpha > 0 & a.alpha == 0), 0) << source;
+        EXPECT_LE(cv::countNonZero(differs), 50) << source;
+      }
+      if (f == 0) {
+        EXPECT_TRUE(b.stats.whole_frame) << source;
+        EXPECT_EQ(b.stats.whole_frame_reason, "no earlier silhouette") << source;
+      } else {
+        EXPECT_FALSE(b.stats.whole_frame) << source << ": " << b.stats.whole_frame_reason;
+        region_frames += !b.stats.whole_frame;
+        cv::Rect box = cv::boundingRect(a.silhouette);
+        box = cv::Rect(box.x - 48, box.y - 48, box.width + 96, box.height + 96) & cv::Rect(0, 0, frame.cols, frame.rows);
+        region_px += box.area();
+        frame_px += frame.total();
+      }
+    }
+  }
+  std::printf("region keying: %lld frames keyed by region, regions %.1f %% of the frames' pixels; main alpha "
+              "differs (outside the region, never silhouette) on %lld px\n",
+              region_frames, 100.0 * static_cast<double>(region_px) / static_cast<double>(frame_px), main_differs);
+  EXPECT_EQ(region_frames, 4 * (kFrames - 1));
+}
+
+// Region keying sends a frame to a whole key when something new shows outside the region (an
+// actor walking in: found on the probed rows), when the silhouette runs into the region's edge
+// (it moved more than the margin), periodically, and after resetRegion(); each time the result
+// is the whole keyer's.
+TEST(Keyer, RegionKeyingFallsBackToWholeFramesWhenItMustAndSaysWhy) {
+  const cv::Vec3b screen(99, 183, 81), red(60, 70, 170);
+  // The actor (40 x 160), an arm held out (rows 150-155, between the probed rows 148 and 156),
+  // a newcomer at the top right (rows 20-31).
+  auto frame = [&](int actor_x, bool arm, bool newcomer) {
+    cv::Mat img(360, 480, CV_8UC3, screen);
+    img(cv::Rect(actor_x, 100, 40, 160)).setTo(red);
+    if (arm) img(cv::Rect(actor_x + 40, 150, 52, 6)).setTo(red);
+    if (newcomer) img(cv::Rect(420, 20, 30, 12)).setTo(red);
+    return img;
+  };
+  KeyerOptions o;
+  o.region_margin_px = 16;
+  o.region_full_every = 6;
+  Keyer whole, region(o);
+  struct Step {
+    int actor_x;
+    bool arm, newcomer;
+    bool whole_frame;
+    std::string reason;
+  };
+  const Step steps[] = {
+      {100, false, false, true, "no earlier silhouette"},
+      {104, false, false, false, ""},
+      {108, false, false, false, ""},
+      {108, true, false, true, "silhouette reached the region's edge"},
+      {110, true, true, true, "foreground outside the region"},
+      {112, true, true, false, ""},
+      {114, true, true, true, "periodic whole frame"},
+      {116, true, true, false, ""},
+  };
+  int i = 0;
+  for (const Step& step : steps) {
+    const std::string source = "step " + std::to_string(i++);
+    const cv::Mat img = frame(step.actor_x, step.arm, step.newcomer);
+    const KeyResult a = whole.key(img, source), b = region.key(img, source);
+    EXPECT_EQ(b.stats.whole_frame, step.whole_frame) << source << ": " << b.stats.whole_frame_reason;
+    if (step.whole_frame) EXPECT_EQ(b.stats.whole_frame_reason, step.reason) << source;
+    EXPECT_EQ(cv::countNonZero(a.silhouette != b.silhouette), 0) << source;
+    EXPECT_EQ(cv::norm(a.alpha, b.alpha, cv::NORM_INF), 0.0) << source;
+  }
+  region.resetRegion();
+  const KeyResult b = region.key(frame(116, true, true), "after reset");
+  EXPECT_TRUE(b.stats.whole_frame);
+  EXPECT_EQ(b.stats.whole_frame_reason, "no earlier silhouette");
+}
+
 TEST(Keyer, SameResultForAnyThreadCount) {
   const Studio s;
   const cv::Mat bgr = s.render(4, kTimes[1], synth::kLayersPlate, false).bgr;

@@ -34,6 +34,7 @@ namespace fs = std::filesystem;
 struct CalibArgs {
   // intrinsics
   std::string images, board, out, report, lock, loss = "huber", select_method = "uncertainty";
+  std::string layout;  // calib board --layout
   std::string camera_name;
   int select = 0;
   int refine = 0;
@@ -232,16 +233,36 @@ int runIntrinsics(const CalibArgs& a) {
 }
 
 int runBoard(const CalibArgs& a) {
-  const BoardSpec board = readBoard(a.board);
+  BoardSpec board = readBoard(a.board);
+  if (!a.layout.empty()) {
+    if (board.type != BoardType::kAprilGrid)
+      throw Error("--layout applies to aprilgrid boards only (this board is a " + std::string(toString(board.type)) + ")",
+                  fieldContext("--layout"));
+    if (a.layout == "kalibr") {
+      board.layout = AprilGridLayout::kKalibr;
+      board.tag_border_cells = 2;  // as Kalibr prints its tags
+    } else if (a.layout == "previz") {
+      board.layout = AprilGridLayout::kPreviz;
+    } else {
+      throw Error("--layout must be kalibr or previz (got '" + a.layout + "')", fieldContext("--layout"));
+    }
+  }
   const calib::PrintedBoard printed = calib::printBoard(board, a.dpi, a.board_out);
   std::cerr << "calib board: " << printed.png.string() << " (" << printed.png_size.width << " x "
             << printed.png_size.height << " px at " << a.dpi << " dpi, " << printed.width_mm
             << " x " << printed.height_mm << " mm), " << printed.svg.string() << ", "
-            << printed.json.string() << "; print at 100 %\n";
+            << printed.json.string()
+            << (printed.kalibr_yaml.empty() ? std::string() : ", " + printed.kalibr_yaml.string() + " (Kalibr's target file)")
+            << (board.type == BoardType::kAprilGrid ? std::string("; ") + toString(board.layout) + " layout, tag border " +
+                                                          std::to_string(board.tag_border_cells) + " cells"
+                                                    : std::string())
+            << "; print at 100 %\n";
   if (a.json) {
     std::cout << nlohmann::json{{"command", "calib board"}, {"png", printed.png.string()},
                                 {"svg", printed.svg.string()}, {"json", printed.json.string()},
-                                {"width_mm", printed.width_mm}, {"height_mm", printed.height_mm}}
+                                {"width_mm", printed.width_mm}, {"height_mm", printed.height_mm},
+                                {"kalibr_yaml", printed.kalibr_yaml.empty() ? nlohmann::json(nullptr)
+                                                                            : nlohmann::json(printed.kalibr_yaml.string())}}
                      .dump()
               << "\n";
   }
@@ -281,7 +302,10 @@ Runner addCalibCommand(CLI::App& app) {
   in->add_flag("--quiet", a->quiet, "No progress line");
 
   CLI::App* bd = cmd->add_subcommand("board", "Write a printable board: PNG at a DPI, SVG in mm, board JSON");
-  bd->add_option("--board", a->board, "Board description (board JSON)")->required();
+  bd->add_option("--board", a->board, "Board description (board JSON, or Kalibr's target YAML)")->required();
+  bd->add_option("--layout", a->layout,
+                 "AprilGrid: kalibr (Kalibr's print: tag 0 bottom left, 2-cell tag borders; also writes "
+                 "<stem>.yaml for Kalibr) or previz (the board file's own layout by default)");
   bd->add_option("--dpi", a->dpi, "Print resolution, dots per inch")->capture_default_str();
   bd->add_option("--out", a->board_out, "Output stem: <stem>.png, <stem>.svg, <stem>.json")->required();
   bd->add_flag("--json", a->json, "Print a JSON summary on stdout");

@@ -96,17 +96,19 @@ std::vector<Shape> boardShapes(const BoardSpec& spec) {
         for (int c = 0; c <= spec.cols; ++c)
           rect(c * pitch, r * pitch, c * pitch + g, r * pitch + g);
       apriltag_family_t* family = tag36h11_create();
-      const int black_width = family->width_at_border;
-      const int border = (family->total_width - black_width) / 2;
+      // libapriltag's bitmap has a one-cell black border; Kalibr's print has spec.tag_border_cells.
+      const int extra = spec.tag_border_cells - 1;
+      const int bitmap_black = family->width_at_border, black_width = bitmap_black + 2 * extra;
+      const int border = (family->total_width - bitmap_black) / 2;
       const double cell = s / black_width;
       for (int r = 0; r < spec.rows; ++r)
         for (int c = 0; c < spec.cols; ++c) {
-          image_u8_t* im = apriltag_to_image(family, spec.first_id + r * spec.cols + c);
+          image_u8_t* im = apriltag_to_image(family, spec.first_id + aprilGridTagIndex(spec, r, c));
           std::vector<std::vector<bool>> bits(static_cast<size_t>(black_width),
-                                              std::vector<bool>(static_cast<size_t>(black_width)));
-          for (int y = 0; y < black_width; ++y)
-            for (int x = 0; x < black_width; ++x)
-              bits[y][x] = im->buf[(y + border) * im->stride + (x + border)] < 128;
+                                              std::vector<bool>(static_cast<size_t>(black_width), true));
+          for (int y = 0; y < bitmap_black; ++y)
+            for (int x = 0; x < bitmap_black; ++x)
+              bits[y + extra][x + extra] = im->buf[(y + border) * im->stride + (x + border)] < 128;
           image_u8_destroy(im);
           bitmapShapes(bits, o + g + c * pitch, o + g + r * pitch, cell, shapes);
         }
@@ -271,7 +273,14 @@ PrintedBoard printBoard(const BoardSpec& spec, double dpi, const std::filesystem
       << mm(sheet.y()) << "mm\" viewBox=\"0 0 " << mm(sheet.x()) << " " << mm(sheet.y())
       << "\" shape-rendering=\"crispEdges\">\n"
       << "<!-- previz calibration board: " << toString(spec.type) << " " << spec.rows << " rows x "
-      << spec.cols << " cols, square " << mm(spec.square_m) << " mm; user units are millimetres;"
+      << spec.cols << " cols, square " << mm(spec.square_m) << " mm;"
+      << (spec.type == BoardType::kAprilGrid
+              ? std::string(" ") + toString(spec.layout) + " layout (" +
+                    (spec.layout == AprilGridLayout::kKalibr ? "tag 0 at the bottom left, ids rising up"
+                                                             : "tag 0 at the top left, ids going down") +
+                    "), tag border " + std::to_string(spec.tag_border_cells) + " cells;"
+              : std::string())
+      << " user units are millimetres;"
       << " print at 100 % (no fit-to-page). Board JSON: " << out.json.filename().string()
       << " -->\n"
       << "<rect x=\"0\" y=\"0\" width=\"" << mm(sheet.x()) << "\" height=\"" << mm(sheet.y())
@@ -288,6 +297,19 @@ PrintedBoard printBoard(const BoardSpec& spec, double dpi, const std::filesystem
   svg << "</svg>\n";
   writeFileAtomic(out.svg, svg.str());
   writeBoard(spec, out.json);
+  if (spec.type == BoardType::kAprilGrid && spec.layout == AprilGridLayout::kKalibr) {
+    // Kalibr's own target description of the same board (its aprilgrid.yaml).
+    out.kalibr_yaml = out_stem;
+    out.kalibr_yaml += ".yaml";
+    std::ostringstream yaml;
+    yaml.precision(10);
+    yaml << "target_type: 'aprilgrid' #gridtype\n"
+         << "tagCols: " << spec.cols << "               #number of apriltags\n"
+         << "tagRows: " << spec.rows << "               #number of apriltags\n"
+         << "tagSize: " << spec.square_m << "           #size of apriltag, edge to edge [m]\n"
+         << "tagSpacing: " << spec.marker_m / spec.square_m << "          #ratio of space between tags to tagSize\n";
+    writeFileAtomic(out.kalibr_yaml, yaml.str());
+  }
   return out;
 }
 

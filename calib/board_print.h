@@ -21,12 +21,14 @@ cv::Mat drawBoard(const BoardSpec& spec, double px_per_m);
 
 struct PrintedBoard {
   std::filesystem::path png, svg, json;
+  std::filesystem::path kalibr_yaml;  // Kalibr-layout AprilGrid: <stem>.yaml, Kalibr's target file
   cv::Size png_size;
   double width_mm = 0, height_mm = 0;  // the sheet, margin included
 };
 
 // Writes <out_stem>.png (dpi dots per inch, pHYs set), <out_stem>.svg (width/height in mm,
-// viewBox in mm) and <out_stem>.json (writeBoard), each atomically. Print at 100 % scale.
+// viewBox in mm) and <out_stem>.json (writeBoard), each atomically; a Kalibr-layout AprilGrid
+// also <out_stem>.yaml (Kalibr's aprilgrid.yaml). Print at 100 % scale.
 // dpi must lie in [25, 2400]; throws Error naming the field or file.
 PrintedBoard printBoard(const BoardSpec& spec, double dpi, const std::filesystem::path& out_stem);
 

@@ -15,6 +15,16 @@ struct Observation {
   Eigen::Vector2d px;         // detected pixel
 };
 
+// A tag / marker of the board as decoded (AprilGrid): its id, the code's bit errors (0 = the
+// exact code) and whether its corners were used. A tag decoded with bit errors is used only when
+// the corners of the tags around it confirm where it sits on the board.
+struct DecodedTag {
+  int id = -1;
+  int bit_errors = 0;
+  bool used = false;
+  std::string why_not;  // when not used
+};
+
 struct FocusMeasure {
   double modified_laplacian = 0;    // Nayar's modified Laplacian, mean over the board region
   double variance_of_laplacian = 0; // variance of the Laplacian over the board region
@@ -30,6 +40,7 @@ struct ViewObservations {
   cv::Size image_size;
   std::vector<Observation> points;    // empty when the board was not found
   std::string failure;                // why nothing was found / why the view was dropped
+  std::vector<DecodedTag> tags;       // AprilGrid: every tag of the board decoded (else empty)
   FocusMeasure focus;
   bool rejected = false;              // set by focus rejection or view selection
   std::string rejected_reason;

@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/detail/yaml_subset.h"
 
 namespace previz {
 
@@ -141,6 +144,9 @@ void BoardSpec::validate() const {
       if (first_id + rows * cols > kTag36h11Codes)
         fail("first_id", "+ " + std::to_string(rows * cols) + " tags exceeds the " +
                              std::to_string(kTag36h11Codes) + " codes of tag36h11");
+      if (tag_border_cells < 1 || tag_border_cells > 2)
+        fail("tag_border_cells", "must be 1 (libapriltag's tag36h11) or 2 (Kalibr's print) (got " +
+                                     std::to_string(tag_border_cells) + ")");
       break;
     }
     case BoardType::kCircles: {
@@ -202,6 +208,32 @@ std::vector<QuadtreeMarker> quadtreeMarkers(const BoardSpec& spec) {
   return markers;
 }
 
+const char* toString(AprilGridLayout layout) {
+  return layout == AprilGridLayout::kKalibr ? "kalibr" : "previz";
+}
+
+GridCell aprilGridTagCell(const BoardSpec& spec, int tag_index) {
+  const int r = tag_index / spec.cols, c = tag_index % spec.cols;
+  return {spec.layout == AprilGridLayout::kKalibr ? spec.rows - 1 - r : r, c};
+}
+
+int aprilGridTagIndex(const BoardSpec& spec, int row, int col) {
+  return (spec.layout == AprilGridLayout::kKalibr ? spec.rows - 1 - row : row) * spec.cols + col;
+}
+
+int aprilGridPointId(const BoardSpec& spec, int tag_index, int corner) {
+  if (spec.layout == AprilGridLayout::kPreviz) return 4 * tag_index + corner;
+  // Kalibr (aprilgrid): tag row rb from the bottom; the corner grid has 2 cols points a row.
+  const int rb = tag_index / spec.cols, c = tag_index % spec.cols, width = 2 * spec.cols;
+  const int bl = 2 * rb * width + 2 * c;
+  switch (corner) {
+    case 0: return bl;
+    case 1: return bl + 1;
+    case 2: return bl + width + 1;
+    default: return bl + width;
+  }
+}
+
 Eigen::Vector2d BoardSpec::size_m() const {
   switch (type) {
     case BoardType::kChessboard:
@@ -230,16 +262,13 @@ std::vector<BoardPoint> boardPoints(const BoardSpec& spec) {
     case BoardType::kAprilGrid: {
       const double g = spec.marker_m;
       points.reserve(static_cast<size_t>(4 * spec.rows * spec.cols));
-      for (int r = 0; r < spec.rows; ++r)
-        for (int c = 0; c < spec.cols; ++c) {
-          const int tag = r * spec.cols + c;
-          const double x0 = g + c * (s + g), y0 = g + r * (s + g);  // top-left as printed
-          // Kalibr's order, which is also libapriltag's p[0..3]: bl, br, tr, tl.
-          points.push_back({4 * tag + 0, Eigen::Vector3d(x0, y0 + s, 0)});
-          points.push_back({4 * tag + 1, Eigen::Vector3d(x0 + s, y0 + s, 0)});
-          points.push_back({4 * tag + 2, Eigen::Vector3d(x0 + s, y0, 0)});
-          points.push_back({4 * tag + 3, Eigen::Vector3d(x0, y0, 0)});
-        }
+      for (int tag = 0; tag < spec.rows * spec.cols; ++tag) {
+        const GridCell cell = aprilGridTagCell(spec, tag);
+        const double x0 = g + cell.col * (s + g), y0 = g + cell.row * (s + g);  // top-left as printed
+        // bl, br, tr, tl as printed (libapriltag's p[0..3]).
+        const Eigen::Vector3d corners[4] = {{x0, y0 + s, 0}, {x0 + s, y0 + s, 0}, {x0 + s, y0, 0}, {x0, y0, 0}};
+        for (int q = 0; q < 4; ++q) points.push_back({aprilGridPointId(spec, tag, q), corners[q]});
+      }
       break;
     }
     case BoardType::kCircles:
@@ -280,6 +309,10 @@ nlohmann::json boardToJson(const BoardSpec& spec) {
   j["legacy_pattern"] = spec.legacy_pattern;
   j["margin_m"] = spec.margin_m;
   if (spec.type == BoardType::kQuadtree) j["levels"] = spec.levels;
+  if (spec.type == BoardType::kAprilGrid) {
+    j["layout"] = toString(spec.layout);
+    j["tag_border_cells"] = spec.tag_border_cells;
+  }
   j["units"] = "m";
   j["frame"] = "origin at the top-left outer corner of the pattern, x along columns, y down rows";
   return j;
@@ -333,6 +366,16 @@ BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file) {
     if (!j.at("dictionary").is_string()) throw fieldError("dictionary", "must be a string");
     spec.dictionary = j.at("dictionary").get<std::string>();
   }
+  for (const char* key : {"layout", "tag_border_cells"})
+    if (j.contains(key) && spec.type != BoardType::kAprilGrid)
+      throw fieldError(key, "applies to aprilgrid boards only (this board is a " + std::string(toString(spec.type)) + ")");
+  if (j.contains("layout")) {
+    const auto& v = j.at("layout");
+    if (!v.is_string() || (v != "previz" && v != "kalibr"))
+      throw fieldError("layout", "must be \"previz\" or \"kalibr\" (got " + v.dump() + ")");
+    spec.layout = v == "kalibr" ? AprilGridLayout::kKalibr : AprilGridLayout::kPreviz;
+  }
+  spec.tag_border_cells = integer("tag_border_cells", spec.tag_border_cells, false);
   if (j.contains("legacy_pattern")) {
     if (!j.at("legacy_pattern").is_boolean()) throw fieldError("legacy_pattern", "must be true or false");
     spec.legacy_pattern = j.at("legacy_pattern").get<bool>();
@@ -347,7 +390,81 @@ BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file) {
   return spec;
 }
 
+namespace {
+
+// Kalibr's target YAML (kalibr/wiki "Calibration targets"): aprilgrid or checkerboard.
+BoardSpec readKalibrTarget(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) throw Error("board: cannot read the file", ErrorContext{file, "", std::nullopt, ""});
+  std::stringstream text;
+  text << in.rdbuf();
+  const detail::YamlNode root = detail::YamlSubsetParser(text.str(), path).parse();
+  auto fieldError = [&](const std::string& field, const std::string& what) {
+    ErrorContext context;
+    context.file = file;
+    context.field = field;
+    return Error("board (Kalibr target): " + field + " " + what, context);
+  };
+  if (root.kind != detail::YamlNode::Kind::kMap) throw fieldError("(root)", "must be a map of 'key: value' lines");
+  auto scalar = [&](const char* key) -> const std::string& {
+    const detail::YamlNode* n = root.find(key);
+    if (n == nullptr) throw fieldError(key, "is missing");
+    if (n->kind != detail::YamlNode::Kind::kScalar) throw fieldError(key, "must be a single value");
+    return n->scalar;
+  };
+  auto number = [&](const char* key) {
+    const std::string& s = scalar(key);
+    char* end = nullptr;
+    const double v = std::strtod(s.c_str(), &end);
+    if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(v))
+      throw fieldError(key, "must be a number (got '" + s + "')");
+    return v;
+  };
+  auto integer = [&](const char* key) {
+    const double v = number(key);
+    if (v != std::floor(v) || v < 1 || v > 1000) throw fieldError(key, "must be a whole number in [1, 1000]");
+    return static_cast<int>(v);
+  };
+  const std::string type = scalar("target_type");
+  BoardSpec spec;
+  if (type == "aprilgrid") {
+    // tagSize: the tag's black square edge; tagSpacing: the gap as a fraction of it. Kalibr prints
+    // tag36h11 with a 2-cell black border and numbers from the bottom left.
+    spec.type = BoardType::kAprilGrid;
+    spec.cols = integer("tagCols");
+    spec.rows = integer("tagRows");
+    spec.square_m = number("tagSize");
+    spec.marker_m = number("tagSpacing") * spec.square_m;
+    spec.dictionary = "tag36h11";
+    spec.layout = AprilGridLayout::kKalibr;
+    spec.tag_border_cells = 2;
+  } else if (type == "checkerboard") {
+    // targetCols / targetRows count inner corners; previz counts squares.
+    spec.type = BoardType::kChessboard;
+    spec.cols = integer("targetCols") + 1;
+    spec.rows = integer("targetRows") + 1;
+    spec.square_m = number("rowSpacingMeters");
+    if (std::abs(number("colSpacingMeters") - spec.square_m) > 1e-9)
+      throw fieldError("colSpacingMeters", "must equal rowSpacingMeters (previz's chessboards have square cells)");
+  } else {
+    throw fieldError("target_type", "must be 'aprilgrid' or 'checkerboard' (got '" + type + "')");
+  }
+  try {
+    spec.validate();
+  } catch (const Error& e) {
+    ErrorContext context = e.context();
+    context.file = file;
+    throw Error(e.message(), context);
+  }
+  return spec;
+}
+
+}  // namespace
+
 BoardSpec readBoard(const std::filesystem::path& path) {
+  const std::string ext = path.extension().string();
+  if (ext == ".yaml" || ext == ".yml") return readKalibrTarget(path);
   return boardFromJson(readJsonFile(path), path.string());
 }
 

@@ -15,6 +15,16 @@ namespace previz {
 enum class BoardType { kChessboard, kCharuco, kAprilGrid, kCircles, kQuadtree };
 const char* toString(BoardType type);
 
+// Whose numbering an AprilGrid's tags and points follow (boardPoints below):
+//  kPreviz: tag index row-major from the top-left of the print (previz's own print, before
+//           Kalibr's was supported); point id = 4 * tag index + corner.
+//  kKalibr: Kalibr's AprilGrid as Kalibr prints and detects it: tag index row-major from the
+//           bottom-left, rows rising up the print; point ids on the grid of 2 x 2 corners per tag,
+//           row-major from the bottom-left, 2 cols points a row (tag (row from the bottom rb,
+//           col c): bl = 2 rb * 2 cols + 2 c, br = bl + 1, tl = bl + 2 cols, tr = tl + 1).
+enum class AprilGridLayout { kPreviz, kKalibr };
+const char* toString(AprilGridLayout layout);
+
 struct BoardSpec {
   BoardType type = BoardType::kChessboard;
   int rows = 7;                 // squares (chessboard, ChArUco), tags (AprilGrid), circles,
@@ -29,6 +39,10 @@ struct BoardSpec {
   bool legacy_pattern = false;  // ChArUco: OpenCV < 4.6 layout for even row counts
   double margin_m = 0.01;       // white border around the pattern when printed
   int levels = 3;               // quadtree only: cell sizes (1 = a plain grid of markers)
+  // AprilGrid only: the numbering, and the tags' black border in cells (libapriltag's tag36h11
+  // has 1; Kalibr prints 2, the code bits the same).
+  AprilGridLayout layout = AprilGridLayout::kPreviz;
+  int tag_border_cells = 1;
 
   void validate() const;        // throws Error naming the bad field
   // Extent of the pattern (without margin), metres: (width along x, height along y).
@@ -38,8 +52,8 @@ struct BoardSpec {
 // A detectable point of the board: the id a detector reports and its board-frame position.
 //  chessboard: inner corners, row-major, id = r * (cols - 1) + c (OpenCV's order)
 //  ChArUco:    inner chessboard corners, OpenCV's charuco ids (row-major)
-//  AprilGrid:  4 corners per tag, id = 4 * tag_index + corner (Kalibr order: bl, br, tr, tl
-//              as seen in the print), tag_index row-major from the top-left
+//  AprilGrid:  4 corners per tag (corner 0..3: bl, br, tr, tl as seen in the print, which is
+//              libapriltag's order), ids as BoardSpec::layout says (aprilGridPointId)
 //  circles:    circle centres, row-major
 //  quadtree:   4 corners per marker, id = 4 * marker_index + corner (OpenCV's aruco order: tl,
 //              tr, br, bl as seen in the print), marker_index as quadtreeMarkers() lists them
@@ -48,6 +62,15 @@ struct BoardPoint {
   Eigen::Vector3d p_board;
 };
 std::vector<BoardPoint> boardPoints(const BoardSpec& spec);
+
+// AprilGrid: where tag index k (= tag id - first_id) is printed (row 0 at the top of the print),
+// the index printed at (row, col), and the point id of its corner (0..3: bl, br, tr, tl).
+struct GridCell {
+  int row = 0, col = 0;
+};
+GridCell aprilGridTagCell(const BoardSpec& spec, int tag_index);
+int aprilGridTagIndex(const BoardSpec& spec, int row, int col);
+int aprilGridPointId(const BoardSpec& spec, int tag_index, int corner);
 
 // The quadtree ArUco board (the thesis' design): a square of cols x cols outer cells of
 // square_m (rows == cols). Cell (r, c) lies in ring k = min(r, c, cols-1-r, cols-1-c) (its
@@ -75,6 +98,9 @@ int openCvDictionaryId(const std::string& name);
 
 nlohmann::json boardToJson(const BoardSpec& spec);
 BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file = {});
+// A board file: previz's JSON, or Kalibr's target YAML (target_type 'aprilgrid' with tagCols,
+// tagRows, tagSize, tagSpacing: a Kalibr-layout AprilGrid with 2-cell tag borders; or
+// 'checkerboard' with targetCols, targetRows (inner corners), rowSpacingMeters = colSpacingMeters).
 BoardSpec readBoard(const std::filesystem::path& path);
 void writeBoard(const BoardSpec& spec, const std::filesystem::path& path);  // atomic
 

@@ -22,9 +22,10 @@ class BoardPrimitive final : public Primitive {
     size_ = spec.size_m();
     if (spec.type == BoardType::kCharuco) buildCharuco();
     if (spec.type == BoardType::kQuadtree) buildQuadtree();
-    if (spec.type == BoardType::kAprilGrid)
-      for (int i = 0; i < spec.rows * spec.cols; ++i)
-        tag_bitmaps_.push_back(detail::tag36h11Bitmap(spec.first_id + i));
+    if (spec.type == BoardType::kAprilGrid)  // in print order: row-major from the top left
+      for (int r = 0; r < spec.rows; ++r)
+        for (int c = 0; c < spec.cols; ++c)
+          tag_bitmaps_.push_back(detail::tag36h11Bitmap(spec.first_id + aprilGridTagIndex(spec, r, c)));
     const Eigen::Vector2d lo(-spec.margin_m, -spec.margin_m);
     const Eigen::Vector2d hi = size_ + Eigen::Vector2d(spec.margin_m, spec.margin_m);
     lo_ = lo;
@@ -97,11 +98,14 @@ class BoardPrimitive final : public Primitive {
         const bool gap_x = lx < g, gap_y = ly < g;
         if (gap_x && gap_y) return true;  // Kalibr's corner squares
         if (gap_x || gap_y || c >= spec_.cols || r >= spec_.rows) return false;
-        const double cell = s / detail::kTagBlackWidth;
-        const int bx = std::min(static_cast<int>((lx - g) / cell), detail::kTagBlackWidth - 1) + 1;
-        const int by = std::min(static_cast<int>((ly - g) / cell), detail::kTagBlackWidth - 1) + 1;
+        // The black square is the bitmap's (one border cell) widened by the extra border cells.
+        const int extra = spec_.tag_border_cells - 1, black = detail::kTagBlackWidth + 2 * extra;
+        const double cell = s / black;
+        const int bx = std::min(static_cast<int>((lx - g) / cell), black - 1) - extra;
+        const int by = std::min(static_cast<int>((ly - g) / cell), black - 1) - extra;
+        if (bx < 0 || by < 0 || bx >= detail::kTagBlackWidth || by >= detail::kTagBlackWidth) return true;
         const std::uint8_t* bitmap = tag_bitmaps_[r * spec_.cols + c];
-        return bitmap[by * detail::kTagBitmapWidth + bx] == 0;
+        return bitmap[(by + 1) * detail::kTagBitmapWidth + bx + 1] == 0;
       }
       case BoardType::kCircles: {
         const int c = std::min(static_cast<int>(x / s), spec_.cols - 1);

@@ -4,6 +4,7 @@
 #include "calib/board_print.h"
 
 #include <cmath>
+#include <map>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -79,6 +80,11 @@ std::vector<BoardSpec> smallBoards() {
   grid.first_id = 5;
   grid.margin_m = 0.01;
   boards.push_back(grid);
+  BoardSpec kalibr = grid;  // Kalibr's print: numbered from the bottom left, 2-cell tag borders
+  kalibr.layout = AprilGridLayout::kKalibr;
+  kalibr.tag_border_cells = 2;
+  kalibr.first_id = 0;
+  boards.push_back(kalibr);
   BoardSpec circles;
   circles.type = BoardType::kCircles;
   circles.rows = 4;
@@ -142,13 +148,13 @@ TEST(BoardPrint, PngHasPhysicalSizeAndDpiAndEveryPointIsRedetected) {
     // up to half a pixel from the exact ones, so a point may be off by sqrt(2)/2 px.
     const double px_per_m = dpi / 0.0254;
     const ViewObservations obs = detectBoard(png, spec, {}, printed.png.string());
-    const std::vector<BoardPoint> points = boardPoints(spec);
+    std::map<int, Eigen::Vector3d> points;
+    for (const BoardPoint& bp : boardPoints(spec)) points[bp.id] = bp.p_board;
     EXPECT_EQ(obs.points.size(), points.size()) << toString(spec.type) << ": " << obs.failure;
     double worst = 0;
     for (const Observation& o : obs.points) {
-      ASSERT_GE(o.id, 0);
-      ASSERT_LT(o.id, static_cast<int>(points.size()));
-      const Eigen::Vector3d& p = points[o.id].p_board;
+      ASSERT_EQ(points.count(o.id), 1u) << o.id;
+      const Eigen::Vector3d& p = points.at(o.id);
       const Eigen::Vector2d expected((p.x() + spec.margin_m) * px_per_m - 0.5,
                                      (p.y() + spec.margin_m) * px_per_m - 0.5);
       worst = std::max(worst, (expected - o.px).norm());
@@ -158,6 +164,49 @@ TEST(BoardPrint, PngHasPhysicalSizeAndDpiAndEveryPointIsRedetected) {
                 obs.points.size(), points.size(), worst);
     EXPECT_LE(worst, 0.71) << toString(spec.type);
   }
+}
+
+// A Kalibr-layout AprilGrid prints as Kalibr prints it: tag 0 at the bottom left of the sheet
+// with ids rising to the right and then up, 2-cell black borders (libapriltag's own tag36h11
+// family, 1-cell, decodes none of it), and Kalibr's aprilgrid.yaml beside it, which reads back
+// as the same board.
+TEST(BoardPrint, KalibrLayoutAprilGridIsKalibrsPrint) {
+  BoardSpec spec;
+  spec.type = BoardType::kAprilGrid;
+  spec.rows = 3;
+  spec.cols = 4;
+  spec.square_m = 0.03;
+  spec.marker_m = 0.009;
+  spec.dictionary = "tag36h11";
+  spec.margin_m = 0.01;
+  spec.layout = AprilGridLayout::kKalibr;
+  spec.tag_border_cells = 2;
+  const fs::path stem = test::scratchDir("board_print", "kalibr") / "aprilgrid";
+  const PrintedBoard printed = printBoard(spec, 150, stem);
+  ASSERT_TRUE(fs::exists(printed.kalibr_yaml));
+  const std::string yaml = readBytes(printed.kalibr_yaml);
+  EXPECT_NE(yaml.find("target_type: 'aprilgrid'"), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("tagSpacing: 0.3"), std::string::npos) << yaml;
+  EXPECT_EQ(boardToJson(readBoard(printed.kalibr_yaml)), boardToJson(spec));
+  const cv::Mat png = cv::imread(printed.png.string(), cv::IMREAD_GRAYSCALE);
+  const ViewObservations obs = detectBoard(png, spec, {}, "kalibr print");
+  ASSERT_EQ(obs.tags.size(), 12u) << obs.failure;
+  std::map<int, Eigen::Vector2d> px;
+  for (const Observation& o : obs.points) px[o.id] = o.px;
+  // Kalibr's point ids: tag 0's bl corner is point 0, at the bottom left of the sheet; point 1 (its
+  // br) to the right; point 2 cols (its tl) above; tag 1's bl (point 2) further right.
+  ASSERT_EQ(px.size(), 48u);
+  EXPECT_LT(px.at(0).x(), 0.15 * png.cols);
+  EXPECT_GT(px.at(0).y(), 0.85 * png.rows);
+  EXPECT_GT(px.at(1).x(), px.at(0).x() + 20);
+  EXPECT_LT(px.at(8).y(), px.at(0).y() - 20);
+  EXPECT_NEAR(px.at(8).x(), px.at(0).x(), 1.0);
+  EXPECT_GT(px.at(2).x(), px.at(1).x());
+  for (const DecodedTag& tag : obs.tags) EXPECT_EQ(tag.bit_errors, 0);
+  // The same print read as a 1-cell-border board: nothing decodes.
+  BoardSpec one = spec;
+  one.tag_border_cells = 1;
+  EXPECT_FALSE(detectBoard(png, one, {}, "kalibr print as border 1").found());
 }
 
 TEST(BoardPrint, DrawBoardPutsPointsAtTheirPhysicalPlace) {

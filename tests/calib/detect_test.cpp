@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 #include <string>
@@ -19,11 +20,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "scratch.h"
 #include "core/io.h"
 #include "core/pose.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
+
+namespace fs = std::filesystem;
 
 namespace previz::calib {
 namespace {
@@ -296,6 +300,87 @@ TEST(DetectAprilGrid, CornersWithinTenthPixelAndUnrefinedWithinHalfPixel) {
   const Figures raw = runPoses(spec, unrefined, false);
   EXPECT_EQ(raw.views_found, static_cast<int>(kPoses.size()));
   EXPECT_LE(median(raw.errors), 0.5);
+}
+
+// Kalibr's layout rendered by the synthetic studio (tag 0 at the bottom left, 2-cell tag
+// borders): the same accuracy as previz's own layout, every point id Kalibr's (runPoses compares
+// each with boardPoints' position for that id).
+TEST(DetectAprilGrid, KalibrLayoutCornersWithinTenthPixel) {
+  BoardSpec spec = synth::defaultBoard(BoardType::kAprilGrid);
+  spec.layout = AprilGridLayout::kKalibr;
+  spec.tag_border_cells = 2;
+  const Figures fig = runPoses(spec, {}, false);
+  std::printf("kalibr layout: %d of %d views, %d of %d points, median %.4f px\n", fig.views_found,
+              static_cast<int>(kPoses.size()), fig.points, fig.truth_points, median(fig.errors));
+  EXPECT_EQ(fig.views_found, static_cast<int>(kPoses.size()));
+  EXPECT_GE(fig.points, 0.85 * fig.truth_points);
+  EXPECT_LE(median(fig.errors), 0.1);
+}
+
+// Real Kalibr AprilGrids (../shared/data/aprilgrid-kalibr): a drone camera's view of a 6 x 6 grid
+// (EuRoC, turned upside down) and a phone's view of a 6 x 11 print; Kalibr's aprilgrid.yaml as the
+// board. Every tag is found (36 and 66, the counts aprilgrid-rs's tests expect) with no bit
+// errors, and the points are numbered as Kalibr numbers them: each tag's four corners, mapped
+// through the homography they define, put the next tag's corners (right and above, by Kalibr's
+// ids) where they were found, to a few percent of a tag (a wrong or mirrored numbering misses by
+// whole tags).
+TEST(DetectAprilGridReal, KalibrBoardsEveryTagFoundNumberedAsKalibr) {
+  const fs::path dir = fs::path(PREVIZ_SHARED_DATA) / "aprilgrid-kalibr";
+  struct Case {
+    const char* image;
+    int rows, cols;
+    double tag_m;
+  };
+  const Case cases[] = {{"EuRoC.png", 6, 6, 0.088}, {"iphone.png", 6, 11, 0.03}};
+  for (const Case& c : cases) {
+    const fs::path yaml = test::scratchDir("detect", "kalibr") / (std::string(c.image) + ".yaml");
+    {
+      std::ofstream out(yaml);
+      out << "target_type: 'aprilgrid' #gridtype\ntagCols: " << c.cols << "\ntagRows: " << c.rows
+          << "\ntagSize: " << c.tag_m << "\ntagSpacing: 0.3\n";
+    }
+    const BoardSpec spec = readBoard(yaml);
+    const cv::Mat image = cv::imread((dir / c.image).string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(image.empty()) << "real data missing: " << (dir / c.image) << " (../shared/data, see its README)";
+    const ViewObservations obs = detectBoard(image, spec, {}, c.image);
+    int exact = 0;
+    for (const DecodedTag& tag : obs.tags) exact += tag.bit_errors == 0;
+    EXPECT_EQ(static_cast<int>(obs.tags.size()), c.rows * c.cols) << c.image << ": " << obs.failure;
+    EXPECT_EQ(exact, c.rows * c.cols) << c.image;
+    std::map<int, Eigen::Vector3d> board;
+    for (const BoardPoint& bp : boardPoints(spec)) board[bp.id] = bp.p_board;
+    std::map<int, cv::Point2f> px;
+    for (const Observation& o : obs.points) px[o.id] = cv::Point2f(static_cast<float>(o.px.x()), static_cast<float>(o.px.y()));
+    const int width = 2 * c.cols;  // Kalibr: points a row of the corner grid
+    int checked = 0;
+    double worst = 0;
+    for (int tag = 0; tag < c.rows * c.cols; ++tag) {
+      const int bl = 2 * (tag / c.cols) * width + 2 * (tag % c.cols);
+      const int own[4] = {bl, bl + 1, bl + width + 1, bl + width};
+      std::vector<cv::Point2f> from, to;
+      for (int id : own)
+        if (px.count(id)) {
+          from.emplace_back(static_cast<float>(board[id].x()), static_cast<float>(board[id].y()));
+          to.push_back(px[id]);
+        }
+      if (from.size() < 4) continue;
+      const cv::Mat H = cv::getPerspectiveTransform(from, to);
+      const double edge = cv::norm(to[1] - to[0]);
+      for (int next : {bl + 2, bl + 2 * width}) {  // the tag to the right, the tag above
+        if (!px.count(next) || (next == bl + 2 && tag % c.cols == c.cols - 1)) continue;
+        std::vector<cv::Point2f> predicted;
+        cv::perspectiveTransform(std::vector<cv::Point2f>{cv::Point2f(static_cast<float>(board[next].x()),
+                                                                      static_cast<float>(board[next].y()))},
+                                 predicted, H);
+        worst = std::max(worst, cv::norm(predicted[0] - px[next]) / edge);
+        ++checked;
+      }
+    }
+    std::printf("%s: %zu tags (%d exact), %zu points; next tag's corner predicted within %.3f tag edges (%d checks)\n",
+                c.image, obs.tags.size(), exact, obs.points.size(), worst, checked);
+    EXPECT_GE(checked, c.rows * c.cols);
+    EXPECT_LE(worst, 0.08) << c.image;
+  }
 }
 
 // Quadtree (core/board.h): marker corners are L-shaped black corners on white paper, refined by

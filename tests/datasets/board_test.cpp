@@ -20,6 +20,7 @@
 
 #include "core/board.h"
 #include "core/error.h"
+#include "core/io.h"
 #include "datasets/studio.h"
 #include "scratch.h"
 
@@ -322,6 +323,70 @@ TEST(BoardSpec, ValidateNamesTheBadField) {
   } catch (const Error& e) {
     EXPECT_EQ(e.context().field, "marker_m");
     EXPECT_EQ(e.context().file, "b.json");
+  }
+}
+
+// AprilGrid layout and tag border: written and read back, bad values and wrong board types named;
+// Kalibr's target YAML read as a Kalibr-layout grid (and its checkerboard as a chessboard), a bad
+// one naming the field and the file.
+TEST(BoardSpec, AprilGridLayoutAndKalibrTargetFiles) {
+  BoardSpec k = defaultBoard(BoardType::kAprilGrid);
+  k.layout = AprilGridLayout::kKalibr;
+  k.tag_border_cells = 2;
+  nlohmann::json j = boardToJson(k);
+  EXPECT_EQ(j.at("layout"), "kalibr");
+  EXPECT_EQ(j.at("tag_border_cells"), 2);
+  EXPECT_EQ(boardToJson(boardFromJson(j, "k.json")), j);
+  for (const auto& [key, bad] : {std::pair<const char*, nlohmann::json>{"layout", "kalibr2"},
+                                 {"tag_border_cells", 3}}) {
+    nlohmann::json b = j;
+    b[key] = bad;
+    try {
+      boardFromJson(b, "k.json");
+      ADD_FAILURE() << "no error for " << key;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().field, key) << e.what();
+    }
+  }
+  nlohmann::json c = boardToJson(defaultBoard(BoardType::kCharuco));
+  c["layout"] = "kalibr";
+  EXPECT_THROW(boardFromJson(c, "c.json"), Error);
+  // Kalibr point ids: tag 0 (bottom left of the print) has points 0, 1, 2 cols + 1, 2 cols.
+  std::map<int, Eigen::Vector3d> p;
+  for (const BoardPoint& bp : boardPoints(k)) p[bp.id] = bp.p_board;
+  ASSERT_EQ(p.size(), static_cast<size_t>(4 * k.rows * k.cols));
+  EXPECT_EQ(p.rbegin()->first, 4 * k.rows * k.cols - 1);
+  const double bottom = k.size_m().y() - k.marker_m;
+  EXPECT_NEAR(p[0].y(), bottom, 1e-12);                          // bl of tag 0: bottom edge
+  EXPECT_NEAR(p[0].x(), k.marker_m, 1e-12);                      // left
+  EXPECT_NEAR(p[1].x() - p[0].x(), k.square_m, 1e-12);           // br to its right
+  EXPECT_NEAR(p[0].y() - p[2 * k.cols].y(), k.square_m, 1e-12);  // tl above (y down the print)
+
+  const fs::path dir = test::scratchDir("board", "kalibr");
+  const fs::path grid = dir / "aprilgrid.yaml", chess = dir / "checkerboard.yaml", bad = dir / "bad.yaml";
+  writeFileAtomic(grid, "target_type: 'aprilgrid' #gridtype\ntagCols: 6   #number of apriltags\ntagRows: 5\n"
+                        "tagSize: 0.088           #size of apriltag, edge to edge [m]\ntagSpacing: 0.3\n");
+  const BoardSpec g = readBoard(grid);
+  EXPECT_EQ(g.type, BoardType::kAprilGrid);
+  EXPECT_EQ(g.cols, 6);
+  EXPECT_EQ(g.rows, 5);
+  EXPECT_DOUBLE_EQ(g.square_m, 0.088);
+  EXPECT_NEAR(g.marker_m, 0.0264, 1e-12);
+  EXPECT_EQ(g.layout, AprilGridLayout::kKalibr);
+  EXPECT_EQ(g.tag_border_cells, 2);
+  writeFileAtomic(chess, "target_type: 'checkerboard'\ntargetCols: 8\ntargetRows: 5\nrowSpacingMeters: 0.04\n"
+                         "colSpacingMeters: 0.04\n");
+  const BoardSpec ch = readBoard(chess);
+  EXPECT_EQ(ch.type, BoardType::kChessboard);
+  EXPECT_EQ(ch.cols, 9);
+  EXPECT_EQ(ch.rows, 6);
+  writeFileAtomic(bad, "target_type: 'aprilgrid'\ntagCols: 6\ntagRows: six\ntagSize: 0.088\ntagSpacing: 0.3\n");
+  try {
+    readBoard(bad);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().field, "tagRows") << e.what();
+    EXPECT_EQ(e.context().file, bad.string());
   }
 }
 

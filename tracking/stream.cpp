@@ -15,6 +15,7 @@
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "tracking/opentrackio.h"
 
 namespace previz::tracking {
 
@@ -165,32 +166,39 @@ Pose poseFromFreeD(const FreeDPacket& p) {
 
 nlohmann::json openTrackIoSample(const PropResult& prop, int frame, double time_s, double fps,
                                  const std::string& source) {
-  const double secs = std::floor(time_s);
+  // OpenTrackIO 1.0.1 (schema.json): ids are urn:uuid (the source's from its name, the sample's
+  // from the source, frame and prop: stable across runs), timestamps non-negative, and a lost
+  // prop has no "transforms" at all (the schema wants at least one when the key is there).
+  const double t = std::max(0.0, time_s);
+  const double secs = std::floor(t);
+  long long ns = std::llround((t - secs) * 1e9), s = static_cast<long long>(secs);
+  if (ns >= 1000000000LL) {
+    ns -= 1000000000LL;
+    ++s;
+  }
   nlohmann::json j = {
-      {"protocol", {{"name", "OpenTrackIO"}, {"version", {1, 0, 0}}}},
-      {"sourceId", source},
-      {"sourceNumber", prop.id},
+      {"protocol", {{"name", "OpenTrackIO"}, {"version", {1, 0, 1}}}},
+      {"sourceId", urnUuidFromName(source)},
+      {"sampleId", urnUuidFromName(source + "#" + std::to_string(frame) + "#" + std::to_string(prop.id))},
+      {"sourceNumber", std::max(0, prop.id)},
       {"timing",
        {{"mode", "internal"},
-        {"sampleTimestamp",
-         {{"seconds", static_cast<long long>(secs)}, {"nanoseconds", static_cast<long long>(std::llround((time_s - secs) * 1e9))}}},
+        {"sampleTimestamp", {{"seconds", s}, {"nanoseconds", ns}}},
         {"sampleRate", {{"num", static_cast<long long>(std::llround(fps * 1000))}, {"denom", 1000}}},
-        {"sequenceNumber", frame}}},
-      {"tracker", {{"status", prop.tracked ? "tracked" : "lost"}, {"notes", prop.name}}},
+        {"sequenceNumber", std::max(0, frame)}}},
+      {"tracker", {{"status", prop.tracked ? "tracked" : "lost"}, {"notes", prop.name.empty() ? "prop" : prop.name}}},
   };
   if (prop.tracked) {
-    const Eigen::Vector3d a = panTiltRollDeg(prop.T_world_prop.linear());
-    const Eigen::Vector3d t = prop.T_world_prop.translation();
-    j["transforms"] = {{{"id", prop.name},
-                        {"translation", {{"x", t.x()}, {"y", t.y()}, {"z", t.z()}}},
+    const Eigen::Vector3d a = zxyDegFromRotation(prop.T_world_prop.linear());
+    const Eigen::Vector3d tr = prop.T_world_prop.translation();
+    j["transforms"] = {{{"id", prop.name.empty() ? "prop" : prop.name},
+                        {"translation", {{"x", tr.x()}, {"y", tr.y()}, {"z", tr.z()}}},
                         {"rotation", {{"pan", a[0]}, {"tilt", a[1]}, {"roll", a[2]}}}}};
     j["custom"] = {{"previz",
                     {{"prop_id", prop.id},
                      {"sigma_position_mm", 1e3 * prop.measured.sigma_position_m},
                      {"sigma_rotation_deg", prop.measured.sigma_rotation_rad * 180 / M_PI},
                      {"cameras", prop.cameras}}}};
-  } else {
-    j["transforms"] = nlohmann::json::array();
   }
   return j;
 }
@@ -250,8 +258,10 @@ void PoseStreamer::send(const TrackFrame& frame) {
       const FreeDBytes b = encodeFreeD(freeDFromPose(p.id, p.T_world_prop));
       sender_.send(b.data(), b.size());
     } else {
-      const std::string s = openTrackIoSample(p, frame.frame, frame.time_s, fps_, source_).dump();
-      sender_.send(s.data(), s.size());
+      const std::vector<std::uint8_t> d =
+          encodeOtrk(encodeOtrkPayload(openTrackIoSample(p, frame.frame, frame.time_s, fps_, source_), OtrkEncoding::kJson),
+                     OtrkEncoding::kJson, sequence_++);
+      sender_.send(d.data(), d.size());
     }
   }
 }
@@ -305,6 +315,26 @@ void StreamReceiver::parse(const std::uint8_t* data, size_t size) {
     auto p = decodeFreeD(data, size, &why);
     if (!p) return reject(why);
     accepted_.push_back({std::vector<std::uint8_t>(data, data + size), p, std::nullopt});
+    return;
+  }
+  if (size >= 4 && data[0] == 'O' && data[1] == 'T' && data[2] == 'r' && data[3] == 'k') {
+    if (size < static_cast<size_t>(kOtrkHeaderSize)) return reject("opentrackio: truncated header");
+    const size_t payload = ((data[12] << 8) | data[13]) & 0x7FFF;
+    if (kOtrkHeaderSize + payload != size) return reject("opentrackio: length does not match the header");
+    if (fletcher16(data, 14, data + kOtrkHeaderSize, payload) != ((data[14] << 8) | data[15]))
+      return reject("opentrackio: bad checksum");
+    const std::uint8_t* p = data + kOtrkHeaderSize;
+    nlohmann::json j;
+    try {  // nlohmann throws on some inputs even with exceptions off (huge CBOR lengths)
+      j = data[5] == 2 ? nlohmann::json::from_cbor(p, p + payload, true, false)
+                       : nlohmann::json::parse(p, p + payload, nullptr, false);
+    } catch (const std::exception&) {
+      return reject("json: not valid JSON or CBOR");
+    }
+    if (j.is_discarded() || !j.is_object()) return reject("json: not valid JSON");
+    if (!j.contains("protocol") || !j["protocol"].is_object() || j["protocol"].value("name", "") != "OpenTrackIO")
+      return reject("json: not an OpenTrackIO sample");
+    accepted_.push_back({std::vector<std::uint8_t>(data, data + size), std::nullopt, std::move(j)});
     return;
   }
   if (size > 0 && data[0] == '{') {

@@ -48,7 +48,8 @@ Pose poseFromFreeD(const FreeDPacket& packet);
 Eigen::Vector3d panTiltRollDeg(const Eigen::Matrix3d& R);
 Eigen::Matrix3d rotationFromPanTiltRoll(const Eigen::Vector3d& pan_tilt_roll_deg);
 
-// OpenTrackIO-style sample for one prop of one frame (docs/formats.md, "Tracking").
+// OpenTrackIO 1.0.1 sample for one prop of one frame (docs/formats.md, "Tracking"): valid against
+// the SMPTE schema; PoseStreamer sends it behind the 16-byte OTrk header (tracking/opentrackio.h).
 nlohmann::json openTrackIoSample(const PropResult& prop, int frame, double time_s, double fps,
                                  const std::string& source);
 
@@ -90,6 +91,7 @@ class PoseStreamer {
   StreamProtocol protocol_;
   double fps_;
   std::string source_;
+  std::uint16_t sequence_ = 0;  // OpenTrackIO header's sequence number, one per datagram
 };
 
 // Binds a UDP socket on a loopback or numeric address (port 0 = any free port) and parses what

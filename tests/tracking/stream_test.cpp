@@ -1,11 +1,12 @@
 // Issue 6 item 4: FreeD D1 packets round-trip bit for bit through UDP on the loopback and the
 // receiver; malformed datagrams (wrong length, bad checksum, wrong type, garbage) are rejected and
-// counted, never crash it. OpenTrackIO-style JSON round-trips too. Sockets: 127.0.0.1 only.
+// counted, never crash it. OpenTrackIO samples (behind their OTrk header) round-trip too. Sockets: 127.0.0.1 only.
 #include <gtest/gtest.h>
 
 #include <random>
 
 #include "core/error.h"
+#include "tracking/opentrackio.h"
 #include "tracking/stream.h"
 
 namespace previz::tracking {
@@ -155,7 +156,8 @@ TEST(OpenTrackIo, SamplesRoundTripAndLostPropsCarryNoTransform) {
   EXPECT_EQ(ja["tracker"]["status"], "tracked");
   const auto& tr = ja["transforms"][0];
   Pose back = Pose::Identity();
-  back.linear() = rotationFromPanTiltRoll(
+  // OpenTrackIO's rotation: intrinsic Z-X-Y (schema "transforms"), of the prop frame as it is.
+  back.linear() = rotationFromZxyDeg(
       Eigen::Vector3d(tr["rotation"]["pan"].get<double>(), tr["rotation"]["tilt"].get<double>(), tr["rotation"]["roll"].get<double>()));
   back.translation() = Eigen::Vector3d(tr["translation"]["x"].get<double>(), tr["translation"]["y"].get<double>(),
                                        tr["translation"]["z"].get<double>());
@@ -163,7 +165,15 @@ TEST(OpenTrackIo, SamplesRoundTripAndLostPropsCarryNoTransform) {
   EXPECT_LT(rotationDistance(back, a.T_world_prop), 1e-9);
   const nlohmann::json& jb = *receiver.accepted()[1].otio;
   EXPECT_EQ(jb["tracker"]["status"], "lost");
-  EXPECT_TRUE(jb["transforms"].empty());
+  EXPECT_FALSE(jb.contains("transforms"));  // the schema wants >= 1 transform when the key is there
+  // The datagrams carry the 16-byte OTrk header with a Fletcher-16 checksum.
+  const std::vector<std::uint8_t>& bytes = receiver.accepted()[0].bytes;
+  ASSERT_GT(bytes.size(), 16u);
+  EXPECT_EQ(std::string(bytes.begin(), bytes.begin() + 4), "OTrk");
+  EXPECT_EQ(bytes[5], 0x01);
+  EXPECT_EQ(((bytes[12] << 8) | bytes[13]) & 0x7FFF, static_cast<int>(bytes.size()) - 16);
+  EXPECT_EQ(fletcher16(bytes.data(), 14, bytes.data() + 16, bytes.size() - 16), (bytes[14] << 8) | bytes[15]);
+  EXPECT_EQ(ja["sourceId"].get<std::string>().rfind("urn:uuid:", 0), 0u);
   // FreeD sends nothing for a lost prop.
   StreamReceiver r2("127.0.0.1", 0);
   PoseStreamer freed("127.0.0.1", r2.port(), StreamProtocol::kFreeD, 24.0);

@@ -23,6 +23,7 @@
 #include "app/commands.h"
 #include "live/frame_loop.h"
 #include "live/inputs.h"
+#include "live/tracker.h"
 #include "app/options.h"
 #include "app/progress.h"
 #include "batch/process.h"
@@ -81,7 +82,23 @@ struct LoopArgs {
   int key_region_margin_px = live::FrameLoopOptions{}.key_region_margin_px;
   std::string props;
   bool no_props = false;
+  // The stage's camera tracker (run only; live/tracker.h).
+  std::string tracker, tracker_config, tracker_match;
+  double tracker_delay_s = std::nan("");  // NaN: tracker.json's
 };
+
+void addTrackerOptions(CLI::App* cmd, LoopArgs& a) {
+  cmd->add_option("--tracker", a.tracker,
+                  "The main camera's pose (and lens, with --lens) from the stage's camera tracker: freed://HOST:PORT, "
+                  "otio://HOST:PORT (multicast 239.135.1.x:55555 joined), or a recording FILE.jsonl "
+                  "(previz tracker record); replaces --main-poses");
+  cmd->add_option("--tracker-config", a.tracker_config,
+                  "tracker.json: T_world_stage, T_tracker_cam, delay_s, ... (docs/formats.md \"Camera tracker\"; "
+                  "previz tracker align writes it); default: identities, no delay");
+  cmd->add_option("--tracker-delay", a.tracker_delay_s,
+                  "Seconds from a tracker sample's instant to its arrival (overrides tracker.json's delay_s)");
+  cmd->add_option("--tracker-match", a.tracker_match, "auto (timecode when the take and the samples have one), arrival, timecode");
+}
 
 void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   auto* rig = cmd->add_option("--rig", a.rig, "rig.json (witnesses + main); default: the take's truth/rig.json");
@@ -121,7 +138,8 @@ struct Loaded {
   std::unique_ptr<FrameLoop> loop;
   std::unique_ptr<TakeReader> reader;
   std::unique_ptr<PropStage> props;  // null: no prop tracking
-  std::string lens_note, props_note;
+  std::unique_ptr<live::TrackerInput> tracker;  // null: no camera tracker
+  std::string lens_note, props_note, tracker_note;
 };
 
 // The props to track: --props, else the take's props.json when it has a carried prop.
@@ -152,8 +170,13 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   carving::TakeSource src;
   src.take_dir = take_dir;
   src.rig_path = a.rig.empty() ? take_dir / "truth" / "rig.json" : fs::path(a.rig);
+  if (!a.tracker.empty() && (!a.main_poses.empty() || !a.tracked_main_poses.empty()))
+    throw Error("--tracker replaces --main-poses and --tracked-main-poses: give one", fieldContext("--tracker"));
+  // A bad tracker URL is said before the take is read.
+  std::optional<live::TrackerUrl> tracker_url;
+  if (!a.tracker.empty()) tracker_url = live::parseTrackerUrl(a.tracker, "--tracker");
   if (!a.main_poses.empty()) src.main_poses = a.main_poses;
-  else if (a.tracked_main_poses.empty() && fs::exists(take_dir / "truth" / "main_poses.jsonl"))
+  else if (a.tracked_main_poses.empty() && a.tracker.empty() && fs::exists(take_dir / "truth" / "main_poses.jsonl"))
     src.main_poses = take_dir / "truth" / "main_poses.jsonl";
   l.take = std::make_unique<carving::Take>(src);
   const fs::path cg_dir = a.cg_dir.empty() ? take_dir / "cg" : fs::path(a.cg_dir);
@@ -172,8 +195,10 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   TakeInputOptions io;
   io.cg_dir = cg_dir;
   io.tracked_main_poses = a.tracked_main_poses;
+  std::optional<calib::LensTable> lens_table;
   if (!a.lens.empty()) {
     const calib::LensTable table = calib::readLensTable(a.lens);
+    lens_table = table;
     const calib::LensTableEntry e = table.at(a.focus, a.zoom);
     std::string main_name;
     for (const RigCamera& rc : rig.cameras)
@@ -198,6 +223,22 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
     po.tracker.threads = a.threads;
     l.props = std::make_unique<PropStage>(*l.loop, rig, std::move(*props), po);
     l.props->addTo(*l.loop);
+  }
+  if (!a.tracker.empty()) {
+    const live::TrackerUrl& url = *tracker_url;
+    live::TrackerOptions to = a.tracker_config.empty() ? live::TrackerOptions{} : live::readTrackerConfig(a.tracker_config);
+    if (!std::isnan(a.tracker_delay_s)) to.delay_s = a.tracker_delay_s;
+    if (!a.tracker_match.empty()) to.match = a.tracker_match;
+    try {
+      to.validate();
+    } catch (const Error& e) {
+      throw Error(e.what(), fieldContext(e.context().field == "delay_s" ? "--tracker-delay"
+                                         : e.context().field == "match" ? "--tracker-match" : e.context().field));
+    }
+    const RigCamera& main = rig.at(l.loop->mainCamera());
+    l.tracker = std::make_unique<live::TrackerInput>(url, to, main.camera, lens_table);
+    io.tracker = l.tracker.get();
+    l.tracker_note = "camera tracker " + a.tracker + (lens_table ? " (lens from its encoders)" : "");
   }
   l.reader = std::make_unique<TakeReader>(*l.take, *l.loop, io);
   return l;
@@ -259,6 +300,7 @@ int runRun(const RunArgs& a) {
               << l.loop->carveCameras().size()
               << " witnesses carve, main '" << main << "'" << (l.lens_note.empty() ? "" : ", " + l.lens_note)
               << (l.props_note.empty() ? ", no props" : ", " + l.props_note)
+              << (l.tracker_note.empty() ? "" : ", " + l.tracker_note)
               << "; stages:";
     for (const std::string& s : l.loop->stages()) std::cerr << " " << s;
     std::cerr << " -> " << out << "\n";
@@ -366,6 +408,7 @@ int runRun(const RunArgs& a) {
     std::cerr << ", live at " << live->fps() << " fps: " << live->delivered() << " frames processed, "
               << live->dropped() << " dropped (late)";
   std::cerr << " -> " << out << "\n";
+  if (l.tracker) std::cerr << "run: tracker " << l.tracker->summary().dump() << "\n";
   if (a.json) {
     std::cout << nlohmann::json{{"command", "run"},
                                 {"out", out.string()},
@@ -376,6 +419,7 @@ int runRun(const RunArgs& a) {
                                 {"dropped", dropped},
                                 {"failed", failed},
                                 {"props", l.props ? nlohmann::json((out / "props.jsonl").string()) : nlohmann::json()},
+                                {"tracker", l.tracker ? l.tracker->summary() : nlohmann::json()},
                                 {"live", live ? nlohmann::json{{"fps", live->fps()},
                                                                {"delivered", live->delivered()},
                                                                {"dropped_frames", live->dropped()}}
@@ -817,6 +861,7 @@ Runner addRunCommand(CLI::App& app) {
   cmd->add_option("--take", a->take, "Take folder (cams/: a sequence or video per camera, cg/; docs/formats.md \"Take folder\")")->required();
   cmd->add_option("--out", a->out, "Output folder")->required();
   addLoopOptions(cmd, a->loop, false);
+  addTrackerOptions(cmd, a->loop);
   cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
   cmd->add_option("--live", a->live,
                   "Read cameras live through OpenCV VideoCapture: NAME=SOURCE per camera (device index, "

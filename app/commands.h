@@ -22,6 +22,8 @@ Runner addCarveCommand(CLI::App& app);
 Runner addTrackCommand(CLI::App& app);
 Runner addCompositeCommand(CLI::App& app);
 Runner addRunCommand(CLI::App& app);
+// `previz tracker record | replay | simulate | align` (live/tracker.h).
+Runner addTrackerCommand(CLI::App& app);
 // `previz bench run` (the bench command with its verbs).
 Runner addBenchCommand(CLI::App& app);
 Runner addBatchCommand(CLI::App& app);

@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   add("track", previz::app::addTrackCommand);
   add("composite", previz::app::addCompositeCommand);
   add("run", previz::app::addRunCommand);
+  add("tracker", previz::app::addTrackerCommand);
   add("bench", previz::app::addBenchCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");

@@ -15,6 +15,7 @@
 #include "core/pose.h"
 #include "core/rig.h"
 #include "live/frame_loop.h"
+#include "live/tracker.h"
 #include "take/live.h"
 
 namespace previz::live {
@@ -32,6 +33,12 @@ struct TakeInputOptions {
   // listed. That is how a rig previz calibrated itself, in its own world frame, meets a tracked
   // camera. Empty: the take's main poses (world poses, carving/take.h) or the rig's.
   std::filesystem::path tracked_main_poses;
+  // The stage's camera tracker (live/tracker.h; `run --tracker`): when set, every frame's main
+  // camera comes from it (pose, and lens when it holds a lens table) and a frame it has no pose
+  // for is an Error naming the frame ("no tracker pose: ..."). Not owned; outlives the reader.
+  // Frame f's instant is (f - the take's first frame) / the take's fps, and its timecode the
+  // main camera's start timecode + that many frames (when the main stream has one).
+  TrackerInput* tracker = nullptr;
 };
 
 class TakeReader {
@@ -54,6 +61,9 @@ class TakeReader {
   Camera cg_;
   TakeInputOptions options_;
   std::map<int, Pose> tracked_;
+  double fps_ = 24;
+  int first_frame_ = 0;
+  std::optional<double> tc0_s_;  // seconds of day of take frame first_frame_ (main stream's timecode)
 };
 
 // Live input (take/live.h): one source per camera (a device index "0", a file, a network

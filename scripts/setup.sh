@@ -16,6 +16,7 @@ packages=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev   # video takes: containers, timecode
   libgtest-dev libgmock-dev libbenchmark-dev
   slurm-wlm munge chromium   # batch tests: a loopback Slurm cluster, the summary page in Chromium
+  python3 python3-jsonschema   # OpenTrackIO tests: payloads checked against the SMPTE schema
 )
 
 missing=()

@@ -28,6 +28,18 @@ else
   fail "track runs: $(cat "$tmp/err")"
 fi
 
+# Issue 32: what `track --otio` sends is OpenTrackIO: each datagram's header checked with the SMPTE
+# reference code, its payload with python3-jsonschema against the official schema (1.0.1).
+validator="$(dirname "$0")/../live/validate_opentrackio.py"
+rm -f "$tmp/otio.hex" "$tmp/otio.hex.ready" "$tmp/otio.hex.stop"
+python3 "$validator" "$2/opentrackio" listen 47998 1000 120 "$tmp/otio.hex" > "$tmp/otio.out" 2>&1 &
+listener=$!
+for _ in $(seq 50); do [ -f "$tmp/otio.hex.ready" ] && break; sleep 0.1; done
+"$bin" track --take "$T" --rig "$T/truth/rig.json" --props "$T/props.json" --main-poses "$T/truth/main_poses.jsonl" \
+  --out "$tmp/out_otio" --udp 127.0.0.1:47998 --otio --quiet 2>"$tmp/err_otio" || fail "track --otio: $(cat "$tmp/err_otio")"
+touch "$tmp/otio.hex.stop"
+if wait $listener; then ok "track --otio datagrams are valid OpenTrackIO: $(cat "$tmp/otio.out")"; else fail "track --otio: $(cat "$tmp/otio.out")"; fi
+
 # A main camera pose the camera tracker lost (camera_poses.jsonl's "lost" line): the main camera
 # sits that frame out, named with the reason; the witnesses still track the crate.
 { head -n 1 "$T/truth/main_poses.jsonl"; echo '{"frame":1,"camera":"main","state":"lost","reason":"no studio tag seen"}'; } > "$tmp/lost_poses.jsonl"

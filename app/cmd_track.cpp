@@ -1,6 +1,8 @@
 // previz track: AprilTag-tagged props from every camera of a take -> one JSON line per frame and
 // optional FreeD / OpenTrackIO streaming; `track prop` writes props.json and printable tag sheets;
 // `track camera` solves a camera's pose per frame from studio tags. The work is tracking/.
+#include <cmath>
+#include <filesystem>
 #include <iostream>
 #include <sstream>
 
@@ -11,14 +13,21 @@
 #include "app/progress.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/rig.h"
+#include "live/tracker.h"
+#include "take/take.h"
 #include "tracking/props.h"
 #include "tracking/run.h"
 
 namespace previz::app {
 namespace {
 
+namespace fs = std::filesystem;
+
 struct TrackArgs {
   std::string take, rig, props, out, udp, main_poses, cameras, truth, frames, shard = "0/1";
+  std::string tracker, tracker_config, tracker_match;  // the main camera from the stage's tracker
+  double tracker_delay_s = std::nan("");
   bool freed = false, otio = false, frame_files = false;
   double fps = 0;
   float decimate = 1.0f, sigma = 0.8f;
@@ -101,6 +110,49 @@ nlohmann::json propSummaryJson(const tracking::PropRunSummary& p) {
   return j;
 }
 
+// The main camera's poses from the stage's camera tracker (live/tracker.h), one line a frame of
+// the take into OUT/tracker_main_poses.jsonl as camera_poses.jsonl has them: {"frame", "state":
+// "tracked", "T_world_cam"}, or {"frame", "state": "lost", "reason"} where the tracker gave none
+// (the main camera is then left out of that frame). Pose only: track uses the rig's lens.
+fs::path trackerMainPoses(const TrackArgs& a) {
+  const live::TrackerUrl url = live::parseTrackerUrl(a.tracker, "--tracker");
+  live::TrackerOptions o = a.tracker_config.empty() ? live::TrackerOptions{} : live::readTrackerConfig(a.tracker_config);
+  if (!std::isnan(a.tracker_delay_s)) o.delay_s = a.tracker_delay_s;
+  if (!a.tracker_match.empty()) o.match = a.tracker_match;
+  try {
+    o.validate();
+  } catch (const Error& e) {
+    throw Error(e.what(), fieldContext(e.context().field == "delay_s" ? "--tracker-delay"
+                                       : e.context().field == "match" ? "--tracker-match" : e.context().field));
+  }
+  const Rig rig = readRig(a.rig);
+  std::string main_name = "main";  // the moving camera: the rig's "main" role, else the camera called main
+  for (const RigCamera& rc : rig.cameras)
+    if (rc.role == "main") main_name = rc.camera.name;
+  const RigCamera& main = rig.at(main_name);
+  const take::Take streams(a.take);
+  const live::FrameClock clock = live::frameClock(streams, main_name);
+  live::TrackerInput input(url, o, main.camera);
+  std::string lines;
+  int posed = 0, lost = 0;
+  for (int f : streams.frames()) {
+    try {
+      const RigCamera rc = input.mainAt(f, clock.timeOf(f), clock.timecodeOf(f), main);
+      lines += nlohmann::json{{"frame", f}, {"state", "tracked"}, {"T_world_cam", poseToJson(rc.T_world_cam)}}.dump() + "\n";
+      ++posed;
+    } catch (const Error& e) {
+      lines += nlohmann::json{{"frame", f}, {"state", "lost"}, {"reason", e.what()}}.dump() + "\n";
+      ++lost;
+    }
+  }
+  fs::create_directories(a.out);
+  const fs::path path = fs::path(a.out) / "tracker_main_poses.jsonl";
+  writeFileAtomic(path, lines);
+  std::cerr << "track: main camera from the tracker " << a.tracker << ": " << posed << " frames posed, " << lost
+            << " without a pose; " << input.summary()["counts"].dump() << " -> " << path.string() << "\n";
+  return path;
+}
+
 int runTrack(const TrackArgs& a) {
   for (const char* f : {"--take", "--rig", "--props", "--out"}) {
     const std::string& v = std::string(f) == "--take" ? a.take : std::string(f) == "--rig" ? a.rig
@@ -114,6 +166,10 @@ int runTrack(const TrackArgs& a) {
   in.rig = a.rig;
   in.props = a.props;
   in.main_poses = a.main_poses;
+  if (!a.tracker.empty()) {
+    if (!a.main_poses.empty()) throw Error("--tracker replaces --main-poses: give one", fieldContext("--tracker"));
+    in.main_poses = trackerMainPoses(a);
+  }
   in.cameras = splitList(a.cameras);
   in.truth = a.truth;
   tracking::TrackRunOptions o;
@@ -324,6 +380,12 @@ Runner addTrackCommand(CLI::App& app) {
   cmd->add_option("--udp", a->udp, "Stream to HOST:PORT (numeric IPv4)");
   cmd->add_flag("--freed", a->freed, "Stream FreeD D1 packets (default with --udp)");
   cmd->add_flag("--otio", a->otio, "Stream OpenTrackIO-style JSON instead");
+  cmd->add_option("--tracker", a->tracker,
+                  "The main camera's pose from the stage's camera tracker: freed://HOST:PORT, otio://HOST:PORT or a "
+                  "recording FILE.jsonl (previz tracker record); replaces --main-poses (docs/formats.md \"Camera tracker\")");
+  cmd->add_option("--tracker-config", a->tracker_config, "tracker.json (T_world_stage, T_tracker_cam, delay_s, ...)");
+  cmd->add_option("--tracker-delay", a->tracker_delay_s, "Seconds from a tracker sample's instant to its arrival");
+  cmd->add_option("--tracker-match", a->tracker_match, "auto, arrival or timecode");
   cmd->add_option("--main-poses", a->main_poses,
                   "JSON lines {frame, T_world_cam} of the moving main camera (truth/main_poses.jsonl, or "
                   "`track camera` output)");

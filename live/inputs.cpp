@@ -15,7 +15,6 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/pose.h"
-#include "take/timecode.h"
 
 namespace previz::live {
 
@@ -34,21 +33,7 @@ TakeReader::TakeReader(const carving::Take& take, const FrameLoop& loop, const T
                   c);
     }
   }
-  fps_ = take.streams().fps() > 0 ? take.streams().fps() : 24;
-  if (!take.frames().empty()) first_frame_ = take.frames().front();
-  if (options_.tracker && take.streams().has(main_name_)) {
-    const take::CameraStream& st = take.streams().stream(main_name_);
-    if (const std::optional<take::Timecode> tc = take::parseTimecode(st.start_timecode);
-        tc && !st.source_frames.empty()) {
-      try {
-        // The start timecode is the stream's first source frame's; take frame = source - offset.
-        const long long frames = take::timecodeToFrames(*tc, fps_) + (first_frame_ + st.offset - st.source_frames.front());
-        tc0_s_ = double(frames) / std::max(1.0, std::round(fps_));
-      } catch (const Error&) {
-        tc0_s_.reset();  // a label the rate does not have: match by arrival
-      }
-    }
-  }
+  if (options_.tracker) clock_ = frameClock(take.streams(), main_name_);
   if (!options_.tracked_main_poses.empty()) {
     const std::string text = readTextFile(options_.tracked_main_poses);
     std::istringstream in(text);
@@ -77,10 +62,7 @@ RigCamera TakeReader::mainAt(int frame) const {
       rc.camera = *options_.main_lens;
       rc.camera.name = name;
     }
-    const double t = (frame - first_frame_) / fps_;
-    std::optional<double> tc;
-    if (tc0_s_) tc = *tc0_s_ + (frame - first_frame_) / std::max(1.0, std::round(fps_));
-    return options_.tracker->mainAt(frame, t, tc, rc);
+    return options_.tracker->mainAt(frame, clock_.timeOf(frame), clock_.timecodeOf(frame), rc);
   }
   if (!options_.tracked_main_poses.empty()) {
     const auto it = tracked_.find(frame);

@@ -61,9 +61,7 @@ class TakeReader {
   Camera cg_;
   TakeInputOptions options_;
   std::map<int, Pose> tracked_;
-  double fps_ = 24;
-  int first_frame_ = 0;
-  std::optional<double> tc0_s_;  // seconds of day of take frame first_frame_ (main stream's timecode)
+  FrameClock clock_;  // the frames' instants for the tracker
 };
 
 // Live input (take/live.h): one source per camera (a device index "0", a file, a network

@@ -668,6 +668,29 @@ TrackerRecording simulateTracker(const std::function<Pose(double)>& T_world_cam_
 
 // ---- input ---------------------------------------------------------------------------------
 
+std::optional<double> FrameClock::timecodeOf(int frame) const {
+  if (!tc0_s) return std::nullopt;
+  return *tc0_s + (frame - first_frame) / std::max(1.0, std::round(fps));
+}
+
+FrameClock frameClock(const take::Take& streams, const std::string& main_camera) {
+  FrameClock c;
+  c.fps = streams.fps() > 0 ? streams.fps() : 24;
+  if (!streams.frames().empty()) c.first_frame = streams.frames().front();
+  if (!streams.has(main_camera)) return c;
+  const take::CameraStream& st = streams.stream(main_camera);
+  const std::optional<take::Timecode> tc = take::parseTimecode(st.start_timecode);
+  if (!tc || st.source_frames.empty()) return c;
+  try {
+    // The start timecode is the stream's first source frame's; take frame = source - offset.
+    const long long frames = take::timecodeToFrames(*tc, c.fps) + (c.first_frame + st.offset - st.source_frames.front());
+    c.tc0_s = double(frames) / std::max(1.0, std::round(c.fps));
+  } catch (const Error&) {
+    c.tc0_s.reset();  // a label the rate does not have: match by arrival
+  }
+  return c;
+}
+
 TrackerInput::TrackerInput(const TrackerUrl& url, const TrackerOptions& options, const Camera& plate,
                            std::optional<calib::LensTable> lens)
     : url_(url), options_(options), plate_(plate), lens_(std::move(lens)), matcher_(options) {

@@ -38,6 +38,7 @@
 #include "core/camera.h"
 #include "core/pose.h"
 #include "core/rig.h"
+#include "take/take.h"
 #include "tracking/opentrackio.h"
 
 namespace previz::live {
@@ -230,6 +231,18 @@ struct TrackerSimulation {
   void validate() const;
 };
 TrackerRecording simulateTracker(const std::function<Pose(double)>& T_world_cam_at, const TrackerSimulation& sim);
+
+// The instants of a take's frames as the tracker matches them: frame f at (f - first frame) /
+// fps on the take's clock, and its timecode (seconds of day, at the nominal rate) when the main
+// camera's stream has a start timecode: that timecode + (f - its first source frame + offset).
+struct FrameClock {
+  double fps = 24;
+  int first_frame = 0;
+  std::optional<double> tc0_s;  // timecode of first_frame
+  double timeOf(int frame) const { return (frame - first_frame) / fps; }
+  std::optional<double> timecodeOf(int frame) const;
+};
+FrameClock frameClock(const take::Take& streams, const std::string& main_camera);
 
 // What `previz run --tracker` uses: a receiver (socket or recording) and a matcher. For each
 // frame, the main camera: pose from the tracker, lens from the table at the sample's encoders

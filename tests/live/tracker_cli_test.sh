@@ -78,6 +78,20 @@ s = json.load(open(sys.argv[3]))
 assert s["counts"]["accepted"] == len(sent) and s["counts"]["malformed"] == 0, s
 PY
 
+# previz track --tracker: the main camera's poses from the recording (FreeD, arrival - 40 ms)
+# meet the truth.
+if "$bin" track --take "$tmp/take" --rig "$tmp/take/truth/rig.json" --props "$tmp/take/props.json" --tracker "$tmp/freed.jsonl" \
+     --tracker-delay 0.040 --out "$tmp/track" --quiet 2>"$tmp/track.err" && python3 - "$tmp/track/tracker_main_poses.jsonl" "$tmp/take/truth/main_poses.jsonl" <<'PY'
+import json, math, sys
+got = [json.loads(l) for l in open(sys.argv[1])]
+truth = {j["frame"]: j["T_world_cam"]["t"] for j in map(json.loads, open(sys.argv[2]))}
+assert [g["frame"] for g in got] == sorted(truth) and all(g["state"] == "tracked" for g in got), got
+worst = max(1000 * math.dist(g["T_world_cam"]["t"], truth[g["frame"]]) for g in got)
+print("  track --tracker: main camera within %.3f mm of the truth" % worst)
+assert worst < 1.5, worst
+PY
+then ok "track --tracker: the main camera's poses from the recording meet the truth"; else fail "track --tracker: $(cat "$tmp/track.err")"; fi
+
 # Failures that name the flag.
 expect_fail "run: a hostname in --tracker names the flag" "--tracker" \
   "$bin" run --take "$tmp/take" --out "$tmp/o" --tracker freed://localhost:40000 --quiet

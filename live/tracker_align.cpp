@@ -205,13 +205,44 @@ TrackerAlignResult alignTracker(const std::vector<BoardView>& views, const Camer
     track.R.push_back(s.T_stage_tracker.linear());
   }
   if (track.a.size() < 2) throw Error("tracker align: fewer than 2 distinct tracker samples", fieldContext("--tracker-log"));
+  TrackerAlignResult result;
+  if (o.regular_rate && track.a.size() >= 8) {
+    // Sample numbers at the median period (a lost sample leaves its number unused), then the
+    // least-squares line through (number, arrival).
+    std::vector<double> d;
+    for (size_t i = 0; i + 1 < track.a.size(); ++i) d.push_back(track.a[i + 1] - track.a[i]);
+    std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+    const double period = d[d.size() / 2];
+    if (period > 0) {
+      std::vector<double> k(track.a.size());
+      k[0] = 0;
+      for (size_t i = 1; i < k.size(); ++i)
+        k[i] = k[i - 1] + std::max(1.0, std::round((track.a[i] - track.a[i - 1]) / period));
+      double sk = 0, sa = 0, skk = 0, ska = 0;
+      const double n = static_cast<double>(k.size());
+      for (size_t i = 0; i < k.size(); ++i) {
+        sk += k[i];
+        sa += track.a[i];
+        skk += k[i] * k[i];
+        ska += k[i] * track.a[i];
+      }
+      const double b = (n * ska - sk * sa) / (n * skk - sk * sk), a0 = (sa - b * sk) / n;
+      double ss = 0;
+      for (size_t i = 0; i < k.size(); ++i) {
+        const double fit = a0 + b * k[i];
+        ss += (track.a[i] - fit) * (track.a[i] - fit);
+        track.a[i] = fit;
+      }
+      result.arrival_jitter_ms = 1e3 * std::sqrt(ss / n);
+      result.sample_period_s = b;
+    }
+  }
   for (size_t i = 0; i + 1 < track.a.size(); ++i) {
     const Eigen::AngleAxisd aa(track.R[i].transpose() * track.R[i + 1]);
     track.w.push_back(aa.angle() * aa.axis());
   }
   track.w.push_back(Eigen::Vector3d::Zero());
 
-  TrackerAlignResult result;
   std::vector<NormView> norm;
   std::vector<Pose> pnp;  // T_cam_board per view, for the start
   for (const BoardView& v : views) {
@@ -320,17 +351,18 @@ TrackerAlignResult alignTracker(const std::vector<BoardView>& views, const Camer
 std::string TrackerAlignResult::fullReport() const {
   std::ostringstream s;
   const Eigen::AngleAxisd aa(T_tracker_cam.linear());
-  char line[512];
+  char line[768];
   std::snprintf(line, sizeof(line),
                 "tracker align: %d views (%d dropped), %d corners, RMS %.3f px, %d iterations, %.0f ms\n"
                 "  T_tracker_cam: lens at (%.2f, %.2f, %.2f) mm in the tracker frame (%.2f mm away), rotated %.3f deg; "
                 "1 sigma %.3f mm, %.4f deg%s\n"
-                "  delay: %.2f ms (1 sigma %.3f ms): samples arrive this long after their instant\n",
+                "  delay: %.2f ms (1 sigma %.3f ms): samples arrive this long after their instant; arrivals %.3f ms RMS "
+                "about a %.3f ms period (taken out)\n",
                 views, views_dropped, points, rms_px, iterations, solve_ms, 1e3 * T_tracker_cam.translation().x(),
                 1e3 * T_tracker_cam.translation().y(), 1e3 * T_tracker_cam.translation().z(),
                 1e3 * T_tracker_cam.translation().norm(), aa.angle() * 180 / M_PI, 1e3 * sigma_position_m,
                 sigma_rotation_rad * 180 / M_PI, covariance_ok ? "" : " (covariance not available)", 1e3 * delay_s,
-                1e3 * sigma_delay_s);
+                1e3 * sigma_delay_s, arrival_jitter_ms, 1e3 * sample_period_s);
   s << line;
   return s.str();
 }
@@ -351,6 +383,8 @@ nlohmann::json TrackerAlignResult::toJson() const {
           {"points", points},
           {"iterations", iterations},
           {"solve_ms", solve_ms},
+          {"arrival_jitter_ms", arrival_jitter_ms},
+          {"sample_period_s", sample_period_s},
           {"delay_grid", grid}};
 }
 

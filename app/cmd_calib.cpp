@@ -65,6 +65,9 @@ class ImageSource {
       std::sort(files_.begin(), files_.end());
       if (files_.empty()) throw Error("calib: no image files (png, jpg, tif, exr, bmp) in the folder", context);
       count_ = static_cast<int>(files_.size());
+    } else if (fs::is_regular_file(path_) && take::isImageExtension(path_)) {
+      files_.push_back(path_);  // one image
+      count_ = 1;
     } else if (fs::is_regular_file(path_)) {
       try {
         video_ = std::make_unique<take::VideoReader>(path_, 4);
@@ -232,6 +235,66 @@ int runIntrinsics(const CalibArgs& a) {
   return 0;
 }
 
+// previz calib detect: what a user runs first on photos of a board. Per image the board points
+// found, the tags decoded (AprilGrid: with their bit errors) and why nothing was found where
+// nothing was; an image that cannot be read is reported and skipped. Exit 1 when no image shows
+// the board.
+int runDetect(const CalibArgs& a) {
+  const BoardSpec board = readBoard(a.board);
+  ImageSource source(a.images);
+  calib::DetectOptions detect;
+  detect.linear_light = !a.not_srgb;
+  detect.measure_focus = false;
+  nlohmann::json images = nlohmann::json::array();
+  int found = 0;
+  for (int i = 0; i < source.size(); ++i) {
+    nlohmann::json j{{"image", source.name(i)}};
+    try {
+      const cv::Mat image = source.read(i);
+      const calib::ViewObservations v = calib::detectBoard(image, board, detect, source.name(i));
+      j["width"] = image.cols;
+      j["height"] = image.rows;
+      nlohmann::json points = nlohmann::json::array(), tags = nlohmann::json::array();
+      for (const calib::Observation& o : v.points) points.push_back({{"id", o.id}, {"x", o.px.x()}, {"y", o.px.y()}});
+      int bit_errors = 0, unused = 0;
+      for (const calib::DecodedTag& tag : v.tags) {
+        nlohmann::json tj{{"id", tag.id}, {"bit_errors", tag.bit_errors}, {"used", tag.used}};
+        if (!tag.used) tj["why_not"] = tag.why_not;
+        tags.push_back(tj);
+        bit_errors += tag.bit_errors > 0;
+        unused += !tag.used;
+      }
+      j["points"] = points;
+      if (board.type == BoardType::kAprilGrid) j["tags"] = tags;
+      j["found"] = v.found();
+      if (!v.found()) j["why_not"] = v.failure;
+      found += v.found();
+      std::cerr << "calib detect: " << source.name(i) << ": ";
+      if (v.found()) {
+        std::cerr << v.points.size() << " points";
+        if (board.type == BoardType::kAprilGrid)
+          std::cerr << ", " << v.tags.size() << " tags decoded (" << bit_errors << " with bit errors, " << unused
+                    << " not used)";
+      } else {
+        std::cerr << "no board: " << v.failure;
+      }
+      std::cerr << "\n";
+    } catch (const Error& e) {
+      j["found"] = false;
+      j["why_not"] = e.what();
+      std::cerr << "calib detect: " << source.name(i) << ": skipped: " << e.what() << "\n";
+    }
+    images.push_back(j);
+  }
+  std::cerr << "calib detect: board found in " << found << " of " << source.size() << " images\n";
+  if (a.json)
+    std::cout << nlohmann::json{{"command", "calib detect"}, {"board", boardToJson(board)}, {"images", images},
+                                {"found", found}}
+                     .dump()
+              << "\n";
+  return found > 0 ? 0 : 1;
+}
+
 int runBoard(const CalibArgs& a) {
   BoardSpec board = readBoard(a.board);
   if (!a.layout.empty()) {
@@ -310,11 +373,20 @@ Runner addCalibCommand(CLI::App& app) {
   bd->add_option("--out", a->board_out, "Output stem: <stem>.png, <stem>.svg, <stem>.json")->required();
   bd->add_flag("--json", a->json, "Print a JSON summary on stdout");
 
+  CLI::App* dt = cmd->add_subcommand(
+      "detect", "Find the board in images (a folder, one image or a video): per image the points, the tags "
+                "decoded with their bit errors, and why not where none were");
+  dt->add_option("--images", a->images, "Folder of images, one image (8 or 16 bit) or a video file")->required();
+  dt->add_option("--board", a->board, "Board description (board JSON, or Kalibr's target YAML)")->required();
+  dt->add_flag("--not-srgb", a->not_srgb, "8-bit images are not sRGB-encoded (refine corners on the codes)");
+  dt->add_flag("--json", a->json, "Everything found as JSON on stdout");
+
   Runner lens = addLensCommand(*cmd);
   CLI::App* ln = cmd->get_subcommand("lens");
 
-  return [a, in, bd, ln, lens]() {
+  return [a, in, bd, dt, ln, lens]() {
     if (in->parsed()) return runIntrinsics(*a);
+    if (dt->parsed()) return runDetect(*a);
     if (bd->parsed()) return runBoard(*a);
     if (ln->parsed()) return lens();
     return 2;

@@ -10,7 +10,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/../cli/checks.sh"
 # A flat grey 64 x 48 PGM: a readable image with no board in it.
 blank() { { printf 'P5\n64 48\n255\n'; head -c 3072 /dev/zero | tr '\0' '\200'; } > "$1"; }
 
-for sub in "calib" "calib intrinsics" "calib board"; do
+for sub in "calib" "calib intrinsics" "calib board" "calib detect"; do
   if $bin $sub --help 2>&1 | grep -q "Usage"; then ok "$sub --help"; else fail "$sub --help"; fi
 done
 
@@ -67,6 +67,37 @@ if "$bin" calib board --board "$tmp/board.json" --dpi 30 --out "$tmp/print/board
   ok "calib board writes PNG, SVG, JSON"
 else fail "calib board"; fi
 expect_fail "calib board with a bad DPI names it" "dpi" "$bin" calib board --board "$tmp/board.json" --dpi 1 --out "$tmp/print/x"
+
+# calib detect on Kalibr's real boards, the board given as Kalibr's own aprilgrid.yaml: every tag
+# of the EuRoC grid with Kalibr's point ids; a wrong board (the 6 x 11 print read as 6 x 6) says
+# why, and no image with the board exits 1; an unreadable image is skipped and named.
+kal="$data/aprilgrid-kalibr"
+printf "target_type: 'aprilgrid' #gridtype\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n" > "$tmp/euroc.yaml"
+if [ -f "$kal/EuRoC.png" ]; then
+  mkdir -p "$tmp/kal"; cp "$kal/EuRoC.png" "$tmp/kal/"; printf 'not a png' > "$tmp/kal/zz_broken.png"
+  if "$bin" calib detect --images "$tmp/kal" --board "$tmp/euroc.yaml" --json > "$tmp/detect.json" 2> "$tmp/detect.err" \
+     && python3 - "$tmp/detect.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert j["command"] == "calib detect" and j["found"] == 1, j["found"]
+e, broken = j["images"]
+assert e["image"] == "EuRoC.png" and e["found"] and len(e["tags"]) == 36, e.get("why_not")
+assert all(t["used"] and t["bit_errors"] == 0 for t in e["tags"])
+ids = sorted(p["id"] for p in e["points"])
+assert ids == list(range(144)), ids[:10]   # Kalibr's corner grid: 12 x 12 points
+assert broken["image"] == "zz_broken.png" and not broken["found"] and "zz_broken.png" in broken["why_not"], broken
+PY
+  then ok "calib detect: Kalibr's EuRoC grid, 36 tags, Kalibr's 144 point ids; a broken image skipped and named"
+  else fail "calib detect EuRoC: $(cat "$tmp/detect.err")"; fi
+  expect_fail "calib detect: the wrong board says why and exits 1" "iphone.png: no board" \
+    "$bin" calib detect --images "$kal/iphone.png" --board "$tmp/euroc.yaml"
+  if "$bin" calib board --board "$tmp/euroc.yaml" --dpi 50 --out "$tmp/print/kalibr" 2> "$tmp/kboard.err" >/dev/null \
+     && [ -s "$tmp/print/kalibr.yaml" ] && grep -q "kalibr layout, tag border 2 cells" "$tmp/kboard.err"; then
+    ok "calib board of a Kalibr target writes Kalibr's yaml and says its layout"
+  else fail "calib board kalibr: $(cat "$tmp/kboard.err")"; fi
+else
+  fail "real data missing: $kal/EuRoC.png"
+fi
 
 # End to end on the synthetic studio: an intrinsics take, calibrated, against its truth.
 if "$bin" synth --preset intrinsics --board chessboard --frames 10 --size 640x360 --camera witness \

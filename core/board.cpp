@@ -296,6 +296,19 @@ std::vector<BoardPoint> boardPoints(const BoardSpec& spec) {
   return points;
 }
 
+namespace {
+// spec.validate(), its error naming the file too.
+void validateIn(const BoardSpec& spec, const std::string& file) {
+  try {
+    spec.validate();
+  } catch (const Error& e) {
+    ErrorContext context = e.context();
+    context.file = file;
+    throw Error(e.message(), context);
+  }
+}
+}  // namespace
+
 nlohmann::json boardToJson(const BoardSpec& spec) {
   nlohmann::json j;
   j["type"] = toString(spec.type);
@@ -380,13 +393,7 @@ BoardSpec boardFromJson(const nlohmann::json& j, const std::string& file) {
     if (!j.at("legacy_pattern").is_boolean()) throw fieldError("legacy_pattern", "must be true or false");
     spec.legacy_pattern = j.at("legacy_pattern").get<bool>();
   }
-  try {
-    spec.validate();
-  } catch (const Error& e) {
-    ErrorContext context = e.context();
-    context.file = file;
-    throw Error(e.message(), context);
-  }
+  validateIn(spec, file);
   return spec;
 }
 
@@ -450,13 +457,7 @@ BoardSpec readKalibrTarget(const std::filesystem::path& path) {
   } else {
     throw fieldError("target_type", "must be 'aprilgrid' or 'checkerboard' (got '" + type + "')");
   }
-  try {
-    spec.validate();
-  } catch (const Error& e) {
-    ErrorContext context = e.context();
-    context.file = file;
-    throw Error(e.message(), context);
-  }
+  validateIn(spec, file);
   return spec;
 }
 
@@ -469,13 +470,7 @@ BoardSpec readBoard(const std::filesystem::path& path) {
 }
 
 void writeBoard(const BoardSpec& spec, const std::filesystem::path& path) {
-  try {
-    spec.validate();
-  } catch (const Error& e) {
-    ErrorContext context = e.context();
-    context.file = path.string();
-    throw Error(e.message(), context);
-  }
+  validateIn(spec, path.string());
   writeJsonAtomic(path, boardToJson(spec));
 }
 

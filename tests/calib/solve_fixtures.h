@@ -255,8 +255,12 @@ inline const RenderedSet& renderedSet(const Camera& camera, const BoardSpec& boa
   static std::map<std::string, RenderedSet> cache;
   char key[256];
   std::snprintf(key, sizeof(key),
-                "%s_%dx%d_f%.3f_c%.3f_%.3f_k%.4f_%.4f_%.4f_r%dc%d_sq%.4f_n%d_s%llu_b%.2f_spp%d",
-                toString(board.type), camera.width, camera.height, camera.fx, camera.cx, camera.cy,
+                "%s%s_%dx%d_f%.3f_c%.3f_%.3f_k%.4f_%.4f_%.4f_r%dc%d_sq%.4f_n%d_s%llu_b%.2f_spp%d",
+                toString(board.type),
+                board.type == BoardType::kAprilGrid && (board.layout != AprilGridLayout::kPreviz || board.tag_border_cells != 1)
+                    ? (std::string("_") + toString(board.layout) + std::to_string(board.tag_border_cells)).c_str()
+                    : "",
+                camera.width, camera.height, camera.fx, camera.cx, camera.cy,
                 camera.dist.k1, camera.dist.k2, camera.dist.k3, board.rows, board.cols,
                 board.square_m, n, static_cast<unsigned long long>(pose_seed), blur_sigma_px,
                 samples_per_pixel);

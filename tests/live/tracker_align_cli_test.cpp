@@ -18,6 +18,7 @@
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
 #include "live/tracker.h"
+#include "handheld_path.h"
 #include "tests/scratch.h"
 
 namespace previz::live {
@@ -27,15 +28,7 @@ namespace fs = std::filesystem;
 
 // Handheld around the board 2.4 m away, four times the pace of tracker_align_test.cpp's
 // (so that 2 s hold enough turns for the hand-eye).
-Pose cameraAt(double t) {
-  t *= 4;
-  const Eigen::Vector3d eye(0.35 * std::sin(2 * M_PI * 0.13 * t), -2.4 + 0.15 * std::sin(2 * M_PI * 0.07 * t + 1),
-                            1.4 + 0.15 * std::sin(2 * M_PI * 0.21 * t));
-  const Eigen::Vector3d target(0.1 * std::sin(2 * M_PI * 0.17 * t), 0, 1.2 + 0.08 * std::cos(2 * M_PI * 0.11 * t));
-  Pose T = lookAt(eye, target);
-  T.linear() = T.linear() * Eigen::AngleAxisd(0.07 * std::sin(2 * M_PI * 0.19 * t), Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  return T;
-}
+Pose cameraAt(double t) { return handheld::aroundBoard(t, 2.4, 4.0); }
 
 TEST(TrackerAlignCli, RenderedBoardTakeGivesTheMountAndDelay) {
   const fs::path dir = test::scratchDir("live", "align_cli");

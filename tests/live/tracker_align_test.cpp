@@ -10,21 +10,14 @@
 
 #include "datasets/rigs.h"
 #include "live/tracker.h"
+#include "handheld_path.h"
 #include "live/tracker_align.h"
 
 namespace previz::live {
 namespace {
 
-// The camera handheld-ish around a board 2.2 m away: sways +-0.35 m sideways, +-0.15 m in
-// height and depth, pans and tilts as it keeps the board in view, rolls +-4 degrees.
-Pose cameraAt(double t) {
-  const Eigen::Vector3d eye(0.35 * std::sin(2 * M_PI * 0.13 * t), -2.2 + 0.15 * std::sin(2 * M_PI * 0.07 * t + 1),
-                            1.4 + 0.15 * std::sin(2 * M_PI * 0.21 * t));
-  const Eigen::Vector3d target(0.1 * std::sin(2 * M_PI * 0.17 * t), 0, 1.2 + 0.08 * std::cos(2 * M_PI * 0.11 * t));
-  Pose T = lookAt(eye, target);
-  T.linear() = T.linear() * Eigen::AngleAxisd(0.07 * std::sin(2 * M_PI * 0.19 * t), Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  return T;
-}
+// The camera handheld-ish around a board 2.2 m away (handheld_path.h).
+Pose cameraAt(double t) { return handheld::aroundBoard(t, 2.2); }
 
 TEST(TrackerAlign, RecoversATwelveCentimetreMountAndFortyMillisecondDelay) {
   const Camera cam = synth::mainCamera(1920, 1080);

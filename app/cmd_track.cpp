@@ -30,7 +30,8 @@ struct TrackArgs {
   double tracker_delay_s = std::nan("");
   bool freed = false, otio = false, frame_files = false;
   double fps = 0;
-  float decimate = 1.0f, sigma = 0.8f;
+  float decimate = 1.0f;
+  std::string sigma = "auto";
   int detector_threads = 1, threads = 0, full_every = 30;
   bool no_refine = false, no_refine_corners = false, no_filter = false, no_roi = false, not_srgb = false;
   std::vector<std::string> per_camera;
@@ -48,7 +49,8 @@ struct PropArgs {
 struct CameraArgs {
   std::string take, rig, tags, camera = "main", out, truth, frames;
   double fps = 0;
-  float decimate = 1.0f, sigma = 0.8f;
+  float decimate = 1.0f;
+  std::string sigma = "auto";
   bool no_filter = false, not_srgb = false, json = false, quiet = false;
 };
 
@@ -68,9 +70,24 @@ void parseFrames(const std::string& text, tracking::TrackRunOptions& o) {
   }
 }
 
-// "witness01:decimate=2,sigma=0.8,threads=1,refine-edges=0,refine-corners=1"
+// "auto" (the blur chosen from each frame's noise) or a fixed blur in pixels.
+void parseSigma(const std::string& text, const std::string& option, tracking::DetectorOptions& d) {
+  if (text == "auto") {
+    d.auto_sigma = true;
+    return;
+  }
+  const auto number = finiteNumber(text);
+  if (!number || *number < 0)
+    throw Error("expected auto or a blur >= 0 in pixels (got '" + text + "')", fieldContext(option));
+  d.auto_sigma = false;
+  d.sigma = static_cast<float>(*number);
+}
+
+// "witness01:decimate=2,sigma=0.8,threads=1,refine-edges=0,refine-corners=1"; "auto" alone: every
+// camera's blur chosen from its frames' noise (the default).
 void parsePerCamera(const std::string& text, const tracking::DetectorOptions& base,
                     std::map<std::string, tracking::DetectorOptions>& out) {
+  if (text == "auto") return;  // the default; --sigma N makes every camera fixed instead
   const auto colon = text.find(':');
   if (colon == std::string::npos || colon == 0)
     throw Error("expected CAMERA:key=value,... (keys decimate, sigma, threads, refine-edges, refine-corners), got '" +
@@ -80,11 +97,14 @@ void parsePerCamera(const std::string& text, const tracking::DetectorOptions& ba
   for (const std::string& kv : splitList(text.substr(colon + 1))) {
     const auto eq = kv.find('=');
     const std::string key = kv.substr(0, eq);
+    if (key == "sigma" && eq != std::string::npos) {
+      parseSigma(kv.substr(eq + 1), "--detector", d);
+      continue;
+    }
     const auto number = eq == std::string::npos ? std::nullopt : finiteNumber(kv.substr(eq + 1));
     if (!number) throw Error("expected key=number in '" + text + "'", fieldContext("--detector"));
     const double value = *number;
     if (key == "decimate") d.decimate = static_cast<float>(value);
-    else if (key == "sigma") d.sigma = static_cast<float>(value);
     else if (key == "threads") d.threads = static_cast<int>(value);
     else if (key == "refine-edges") d.refine_edges = value != 0;
     else if (key == "refine-corners") d.refine_corners = value != 0;
@@ -192,7 +212,7 @@ int runTrack(const TrackArgs& a) {
   }
   o.frame_files = a.frame_files;
   o.tracker.detector.decimate = a.decimate;
-  o.tracker.detector.sigma = a.sigma;
+  parseSigma(a.sigma, "--sigma", o.tracker.detector);
   o.tracker.detector.threads = a.detector_threads;
   o.tracker.detector.refine_edges = !a.no_refine;
   o.tracker.detector.refine_corners = !a.no_refine_corners;
@@ -332,7 +352,7 @@ int runCamera(const CameraArgs& a) {
   o.fps = a.fps;
   parseFrames(a.frames, o);
   o.tracker.detector.decimate = a.decimate;
-  o.tracker.detector.sigma = a.sigma;
+  parseSigma(a.sigma, "--sigma", o.tracker.detector);
   o.tracker.detector.linear_light = !a.not_srgb;
   o.tracker.filter_enabled = !a.no_filter;
   o.validate();
@@ -398,8 +418,9 @@ Runner addTrackCommand(CLI::App& app) {
                 "Track every frame on its own into OUT/frames/%06d.json (kept when already there); no poses.jsonl");
   cmd->add_option("--decimate", a->decimate, "libapriltag quad_decimate")->capture_default_str();
   cmd->add_option("--sigma", a->sigma,
-                  "libapriltag quad_sigma: blur before the quad search, for sensor noise (at decimate 1 the tags are "
-                  "also decoded on the blurred image: 0 for clean footage, where 0.8 loses small tags)")
+                  "Blur before the quad search (libapriltag quad_sigma), for sensor noise: auto = chosen per camera "
+                  "from each frame's measured noise (0 on clean footage and JPEG photos, 0.8 at 2 grey levels a "
+                  "channel), or a fixed blur in pixels for every camera")
       ->capture_default_str();
   cmd->add_option("--detector-threads", a->detector_threads, "libapriltag threads per camera")->capture_default_str();
   cmd->add_flag("--no-refine-edges", a->no_refine, "Do not refine tag edges on the image gradient (libapriltag)");
@@ -407,7 +428,8 @@ Runner addTrackCommand(CLI::App& app) {
                 "Keep libapriltag's corners (no fit of each tag's edges on linear light)");
   cmd->add_flag("--not-srgb", a->not_srgb, "8-bit images are linear, not sRGB-encoded (corners refined on them as they are)");
   cmd->add_option("--detector", a->per_camera,
-                  "Per-camera detector CAM:decimate=2,sigma=0.8,threads=1,refine-edges=1,refine-corners=1 (repeatable)");
+                  "auto (the default: every camera's blur from its frames' noise) or a camera's own detector "
+                  "CAM:decimate=2,sigma=auto|0.8,threads=1,refine-edges=1,refine-corners=1 (repeatable)");
   cmd->add_option("--threads", a->threads, "OpenMP threads over cameras (0 = all cores)")->capture_default_str();
   cmd->add_option("--full-every", a->full_every,
                   "Each camera searches its whole frame every N frames, staggered over the cameras (0 = only on loss)")
@@ -443,7 +465,8 @@ Runner addTrackCommand(CLI::App& app) {
   cam->add_option("--frames", c->frames, "Frames A:B, A:, :B or A");
   cam->add_option("--fps", c->fps, "Frame rate (default: take.json's, else 24)");
   cam->add_option("--decimate", c->decimate, "libapriltag quad_decimate")->capture_default_str();
-  cam->add_option("--sigma", c->sigma, "libapriltag quad_sigma (0 for clean footage)")->capture_default_str();
+  cam->add_option("--sigma", c->sigma, "Blur before the quad search: auto (from the frames' noise) or pixels")
+      ->capture_default_str();
   cam->add_flag("--no-filter", c->no_filter, "Report the per-frame solve unfiltered");
   cam->add_flag("--not-srgb", c->not_srgb, "8-bit images are linear, not sRGB-encoded");
   cam->add_flag("--json", c->json, "Print a JSON summary on stdout");

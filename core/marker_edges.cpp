@@ -118,9 +118,10 @@ bool refineCornerByEdges(const cv::Mat& lin, const MarkerCorner& e, Eigen::Vecto
   return intersectLines(lines[0], lines[1], out);
 }
 
-bool fitEdgeLine(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
-                 const Eigen::Vector2d& light_side, double reach_px, double margin_px,
-                 Eigen::Vector3d& line) {
+bool measureEdgePoints(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                       const Eigen::Vector2d& light_side, double reach_px, double margin_px,
+                       std::vector<Eigen::Vector2d>& points) {
+  points.clear();
   const Eigen::Vector2d ab = b - a;
   const double length = ab.norm();
   if (!(length - 2 * margin_px >= 2.0)) return false;
@@ -129,14 +130,19 @@ bool fitEdgeLine(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vect
   if (n.dot(light_side) < 0) n = -n;
   const int count = static_cast<int>(std::floor(length - 2 * margin_px)) + 1;  // one a pixel
   const double spacing = (length - 2 * margin_px) / std::max(count - 1, 1);
-  std::vector<Eigen::Vector2d> points;
   for (int k = 0; k < count; ++k) {
     const Eigen::Vector2d p = a + (margin_px + k * spacing) * u;
     double c = 0;
     if (stepOffset(lin, p, n, reach_px, kTagKeepNegative, c)) points.push_back(p + c * n);
   }
-  if (static_cast<int>(points.size()) < std::max(2, count / 2)) return false;
-  return fitLine(points, line);
+  return static_cast<int>(points.size()) >= std::max(2, count / 2);
+}
+
+bool fitEdgeLine(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                 const Eigen::Vector2d& light_side, double reach_px, double margin_px,
+                 Eigen::Vector3d& line) {
+  std::vector<Eigen::Vector2d> points;
+  return measureEdgePoints(lin, a, b, light_side, reach_px, margin_px, points) && fitLine(points, line);
 }
 
 }  // namespace previz

@@ -14,6 +14,7 @@
 // fitEdgeLine (tracking's tags, clear from corner to corner): one whole edge at a time, its
 // corners then where adjacent lines meet (intersectLines).
 #include <array>
+#include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
@@ -45,6 +46,12 @@ bool refineCornerByEdges(const cv::Mat& lin, const MarkerCorner& c, Eigen::Vecto
 bool fitEdgeLine(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
                  const Eigen::Vector2d& light_side, double reach_px, double margin_px,
                  Eigen::Vector3d& line);
+
+// The points fitEdgeLine fits (one a pixel, on the step's centroid); false when the segment is
+// too short or fewer than half of its points could be measured (points then holds those that were).
+bool measureEdgePoints(const cv::Mat& lin, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                       const Eigen::Vector2d& light_side, double reach_px, double margin_px,
+                       std::vector<Eigen::Vector2d>& points);
 
 // Where two such lines meet; false when they are near parallel (|sin| of the angle < 0.2).
 bool intersectLines(const Eigen::Vector3d& l0, const Eigen::Vector3d& l1, Eigen::Vector2d& out);

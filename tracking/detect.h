@@ -23,6 +23,11 @@ struct DetectorOptions {
   // 2 grey levels of noise the unblurred search segments the noise itself and is ~7x slower for
   // the same tags.
   float sigma = 0.8f;
+  // auto_sigma: quad_sigma chosen on every call from the image's own noise (estimateNoise, over
+  // the rectangles searched) instead of 'sigma': sigmaForNoise. On the studio's witnesses (noise
+  // 2 grey levels a channel) that is 0.8 as before; on clean footage, JPEG photos and a good
+  // camera's frames 0, which finds the small tags the blur loses.
+  bool auto_sigma = true;
   int threads = 1;             // libapriltag worker threads per call (the tracker runs cameras in parallel)
   bool refine_edges = true;    // fit each edge to the image gradient (sub-pixel corners)
   double decode_sharpening = 0.25;
@@ -54,7 +59,26 @@ struct TagDetection {
   std::array<Eigen::Vector2d, 4> corners_px;
   int hamming = 0;
   float decision_margin = 0;
+  // With DetectorOptions::refine_corners: whether corners_px are previz's refined corners (else
+  // libapriltag's, and refine_why_not says why), and the tone response's shift of the tag's edges
+  // that the refinement measured and took out (px, towards the light side; 0 for an sRGB camera
+  // decoded as sRGB).
+  bool refined = false;
+  std::string refine_why_not;
+  double response_shift_px = 0;
 };
+
+// The standard deviation (grey levels) of the noise of an 8-bit image's grey (a BGR image's grey as
+// libapriltag gets it): Immerkaer's Laplacian-difference estimator (J. Immerkaer, "Fast noise
+// variance estimation", CVIU 1996) with the median of |response| instead of its mean, so that
+// edges and texture (a minority of the pixels) do not count as noise; sampled inside rect
+// (clipped to the image).
+double estimateNoise(const cv::Mat& image, const cv::Rect& rect);
+// The quad search's blur for that noise: 0 under 0.8 grey levels (clean footage, JPEG photos,
+// whose compression removes the sensor's noise from flat areas: the real photos of
+// ../shared/data/apriltag-real measure 0.5), 0.62 x noise above (the studio's witnesses, 2 levels
+// a channel, 1.3 in the grey: 0.8, the blur the fixed default was tuned to), at most 1.6.
+float sigmaForNoise(double noise);
 
 // A rectangle of the image to search (pixels, clipped to the image by detect()).
 using Roi = cv::Rect;
@@ -74,6 +98,9 @@ class TagDetector {
   std::vector<TagDetection> detect(const cv::Mat& image, const std::vector<Roi>& rois);
 
   const DetectorOptions& options() const;
+  // With auto_sigma: the noise measured on the last call and the blur it chose (else -1 and sigma).
+  double lastNoise() const;
+  float lastSigma() const;
 
  private:
   struct Impl;

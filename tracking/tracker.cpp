@@ -204,6 +204,8 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
       s.rois = s.full_frame ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
       for (const cv::Rect& r : s.rois) s.pixels += r.area();
       found[static_cast<size_t>(c)] = m.detectors[static_cast<size_t>(c)].detect(img, s.rois);
+      s.noise = m.detectors[static_cast<size_t>(c)].lastNoise();
+      s.blur = m.detectors[static_cast<size_t>(c)].lastSigma();
       s.detections = static_cast<int>(found[static_cast<size_t>(c)].size());
     } catch (const std::exception& e) {
       s.failure = e.what();
@@ -335,10 +337,14 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
     }
     props.push_back(j);
   }
-  nlohmann::json failures = nlohmann::json::array();
+  nlohmann::json failures = nlohmann::json::array(), blur = nlohmann::json::object();
   int rois = 0, whole = 0;
   long long pixels = 0;
   for (const CameraSearch& s : f.search) {
+    if (s.failure.empty()) {
+      blur[s.camera] = {{"blur_px", s.blur}};
+      if (s.noise >= 0) blur[s.camera]["noise"] = s.noise;
+    }
     rois += static_cast<int>(s.rois.size());
     whole += s.full_frame ? 1 : 0;
     pixels += s.pixels;
@@ -354,6 +360,7 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
           {"rois", rois},
           {"searched_pixels", pixels},
           {"camera_failures", failures},
+          {"detector", blur},
           {"ms", {{"detect", f.detect_ms}, {"solve", f.solve_ms}, {"total", f.total_ms}}}};
 }
 

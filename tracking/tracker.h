@@ -45,6 +45,10 @@ struct CameraSearch {
   std::vector<cv::Rect> rois;
   long long pixels = 0;             // searched
   int detections = 0;               // tags decoded (any id)
+  // The detector's blur before the quad search, and the frame noise it was chosen from (grey
+  // levels; -1 when the blur is fixed: DetectorOptions::auto_sigma off).
+  double noise = -1;
+  float blur = 0;
   std::string failure;              // e.g. missing image
 };
 

@@ -42,7 +42,11 @@ TEST(TrackingAccuracy, JointSolveWithinTwoMillimetresAndPointTwoDegreesOnRendere
     for (int c = 0; c < fx.cameras(); ++c) {
       const RigCamera& rc = fx.rig.cameras[static_cast<size_t>(c)];
       dist_m.push_back((rc.T_world_cam.translation() - truth.translation()).norm());
-      for (const TagDetection& d : detectors[static_cast<size_t>(c)].detect(images[static_cast<size_t>(c)])) {
+      const std::vector<TagDetection> found = detectors[static_cast<size_t>(c)].detect(images[static_cast<size_t>(c)]);
+      // --detector auto: the witnesses' noise (2 levels a channel) chooses the blur the fixed
+      // default was tuned to.
+      EXPECT_NEAR(detectors[static_cast<size_t>(c)].lastSigma(), 0.8f, 0.08f) << "camera " << c;
+      for (const TagDetection& d : found) {
         const auto owner = props.findTag(d.family, d.id);
         if (!owner) {
           ++unknown;

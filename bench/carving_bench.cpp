@@ -28,6 +28,7 @@
 #include "carving/hull.h"
 #include "carving/keyer.h"
 #include "carving/refine.h"
+#include "core/lens_model.h"
 #include "core/pose.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
@@ -608,9 +609,8 @@ long long denseCarve(const std::vector<DenseCamera>& cams, double voxel, int thr
               const double yn = (c.R[3] * p[0] + c.R[4] * p[1] + c.R[5] * p[2] + c.t[1]) / qz;
               const double r2 = xn * xn + yn * yn;
               if (r2 > 2.0) continue;  // far outside every studio lens' view
-              const double radial = 1 + r2 * (c.k1 + r2 * (c.k2 + r2 * c.k3));
-              const double xd = xn * radial + 2 * c.p1 * xn * yn + c.p2 * (r2 + 2 * xn * xn);
-              const double yd = yn * radial + c.p1 * (r2 + 2 * yn * yn) + 2 * c.p2 * xn * yn;
+              double xd, yd;
+              lens::brownDistort(c.k1, c.k2, c.p1, c.p2, c.k3, xn, yn, xd, yd);
               const int u = static_cast<int>(c.fx * xd + c.skew * yd + c.cx + 0.5 + 1e6) - 1000000;
               const int v = static_cast<int>(c.fy * yd + c.cy + 0.5 + 1e6) - 1000000;
               if (u < 0 || v < 0 || u >= c.w || v >= c.h) continue;

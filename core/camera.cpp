@@ -114,10 +114,9 @@ struct DistortEval {
 };
 
 inline DistortEval distortXY(const Distortion& d, double x, double y) {
-  const double x2 = x * x, y2 = y * y, xy = x * y, r2 = x2 + y2;
-  const double radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
-  return {x * radial + 2.0 * d.p1 * xy + d.p2 * (r2 + 2.0 * x2),
-          y * radial + d.p1 * (r2 + 2.0 * y2) + 2.0 * d.p2 * xy};
+  DistortEval e;
+  lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, e.xd, e.yd);
+  return e;
 }
 
 // The Jacobian of the Brown model is symmetric (it is the gradient of a potential).
@@ -127,12 +126,10 @@ struct Jacobian {
 };
 
 inline Jacobian distortJacobianXY(const Distortion& d, double x, double y) {
-  const double x2 = x * x, y2 = y * y, r2 = x2 + y2;
-  const double radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
-  const double dradial = d.k1 + r2 * (2.0 * d.k2 + r2 * 3.0 * d.k3);  // d radial / d r2
-  return {radial + 2.0 * x2 * dradial + 2.0 * d.p1 * y + 6.0 * d.p2 * x,
-          2.0 * x * y * dradial + 2.0 * d.p1 * x + 2.0 * d.p2 * y,
-          radial + 2.0 * y2 * dradial + 6.0 * d.p1 * y + 2.0 * d.p2 * x};
+  Jacobian j;
+  double xd, yd;
+  lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, xd, yd, j.xx, j.xy, j.yy);
+  return j;
 }
 
 inline bool inDomainXY(const Distortion& d, bool tangential, double s_max, double x, double y) {
@@ -199,7 +196,7 @@ InverseDistortion::InverseDistortion(const Distortion& dist)
     // |distort(x)| <= r radial(r) + |tangential(x)| and, writing x = r (cos a, sin a),
     // tangential(x) = r^2 (2 (p2, p1) + R(2a) (p2, -p1)), so |tangential| <= 3 r^2 |p|. The
     // radial part is increasing on the domain, hence this bound at r_max covers all of it.
-    const double radial = 1.0 + s_max_ * (dist_.k1 + s_max_ * (dist_.k2 + s_max_ * dist_.k3));
+    const double radial = lens::brownRadial(dist_.k1, dist_.k2, dist_.k3, s_max_);
     const double tangential = 3.0 * s_max_ * std::hypot(dist_.p1, dist_.p2);
     rd_max_ = (r_max_ * radial + tangential) * (1.0 + 1e-12);
   } else {
@@ -330,10 +327,10 @@ InverseResult InverseDistortion::fixedPoint(const Eigen::Vector2d& target,
   const double runaway = 1e6 * (1.0 + target.norm());
   const double runaway2 = runaway * runaway;
   for (;;) {
-    const double x2 = x * x, y2 = y * y, xy = x * y, r2 = x2 + y2;
-    const double radial = 1.0 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
-    const double tanx = 2.0 * d.p1 * xy + d.p2 * (r2 + 2.0 * x2);
-    const double tany = d.p1 * (r2 + 2.0 * y2) + 2.0 * d.p2 * xy;
+    const double r2 = x * x + y * y;
+    const double radial = lens::brownRadial(d.k1, d.k2, d.k3, r2);
+    double tanx, tany;
+    lens::brownTangential(d.p1, d.p2, x, y, tanx, tany);
     // The residual of the current iterate costs nothing extra: it uses the same terms as the
     // update.
     const double ex = x * radial + tanx - tx, ey = y * radial + tany - ty;

@@ -1,9 +1,7 @@
 #pragma once
-// Pinhole camera with Brown–Conrady distortion in OpenCV's convention: the model distorts
-// ideal normalized coordinates (x, y) = (X/Z, Y/Z):
-//   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3
-//   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2)
-//   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
+// Pinhole camera with Brown–Conrady distortion in OpenCV's convention (core/lens_model.h, where
+// the model is defined): the model distorts ideal normalized coordinates (x, y) = (X/Z, Y/Z) to
+// (xd, yd), then
 //   u = fx xd + skew yd + cx,  v = fy yd + cy
 // Pixel (0,0) is the centre of the top-left pixel; camera frame x right, y down, z forward.
 // See docs/conventions.md.
@@ -11,6 +9,8 @@
 #include <limits>
 #include <optional>
 #include <string>
+
+#include "core/lens_model.h"
 
 namespace previz {
 
@@ -23,13 +23,6 @@ struct Distortion {
 enum class InverseMethod {
   kFixedPoint,  // the thesis' iteration (Abeles): x <- (xd - tangential(x)) / radial(x)
   kNewton,      // Gauss–Newton on the 2x2 Jacobian of distort(), started at x = xd
-};
-
-enum class InverseStatus {
-  kConverged,      // |distort(x) - xd| <= tolerance
-  kNotConverged,   // ran out of iterations while still improving (slow)
-  kDiverged,       // the iterate grew without bound or oscillated
-  kNotInvertible,  // xd lies outside the image of the invertible domain (past the turning point)
 };
 
 const char* toString(InverseStatus status);

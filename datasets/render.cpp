@@ -8,6 +8,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/lens_model.h"
 #include "datasets/detail/render_kernel.h"
 #include "datasets/random.h"
 
@@ -24,9 +25,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
   throw Error("render: " + field + " " + message, context);
 }
 
-// The Brown model of core/camera.h, evaluated together with its Jacobian in one pass. The inner
-// loop inverts it for every sample; Camera::distort/distortJacobian return through two
-// out-of-line calls each, which cost more than the arithmetic. The test
+// The Brown model of core/lens_model.h, evaluated together with its Jacobian in one pass (inline:
+// the inner loop inverts it for every sample; Camera::distort/distortJacobian return through two
+// out-of-line calls each, which cost more than the arithmetic). The test
 // Render.PixelRayEqualsUnprojectAndProjectsBackBelowNanoPixel holds this copy to Camera::unproject.
 struct Brown {
   double k1, k2, k3, p1, p2;
@@ -41,16 +42,10 @@ struct Brown {
   // f = distort(x) - target, J = d distort / dx.
   void evaluate(double x, double y, double tx, double ty, double& fx, double& fy, double& j00,
                 double& j01, double& j10, double& j11) const {
-    const double x2 = x * x, y2 = y * y, xy = x * y;
-    const double r2 = x2 + y2;
-    const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-    const double dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);  // d radial / d r2
-    fx = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x2) - tx;
-    fy = y * radial + p1 * (r2 + 2.0 * y2) + 2.0 * p2 * xy - ty;
-    j00 = radial + 2.0 * x2 * dradial + 2.0 * p1 * y + 6.0 * p2 * x;
-    j01 = 2.0 * xy * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
-    j10 = 2.0 * xy * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
-    j11 = radial + 2.0 * y2 * dradial + 6.0 * p1 * y + 2.0 * p2 * x;
+    lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, x, y, fx, fy, j00, j01, j11);
+    fx -= tx;
+    fy -= ty;
+    j10 = j01;
   }
 
   // Newton from a nearby start; the same stopping rule as Camera::undistort's default

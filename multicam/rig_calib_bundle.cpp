@@ -14,6 +14,7 @@
 
 #include "calib/detail/projection.h"
 #include "core/error.h"
+#include "core/lens_model.h"
 #include "multicam/detail/bundle.h"
 
 namespace previz::multicam::detail {
@@ -117,21 +118,15 @@ bool rigResidual(const double* intr, const Eigen::Matrix3d& R_wc, const Eigen::V
   if (!(p.z() > 1e-9)) return false;
   const double iz = 1.0 / p.z();
   const double x = p.x() * iz, y = p.y() * iz;
-  const double k1 = intr[kK1], k2 = intr[kK2], k3 = intr[kK3], p1 = intr[kP1], p2 = intr[kP2];
-  const double r2 = x * x + y * y;
-  const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-  const double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-  const double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+  // core/lens_model.h's Brown–Conrady and d(xd, yd) / d(x, y).
+  double xd, yd;
+  Eigen::Matrix2d D;
+  lens::brownDistortWithJacobian(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd, D(0, 0),
+                                 D(0, 1), D(1, 1));
+  D(1, 0) = D(0, 1);
   const double fx = intr[kFx], fy = intr[kFy], s = intr[kSkew];
   out.r = px - Eigen::Vector2d(fx * xd + s * yd + intr[kCx], fy * yd + intr[kCy]);
   if (!jacobians) return true;
-  // d radial / d r2, then d(xd, yd) / d(x, y).
-  const double dradial = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3);
-  Eigen::Matrix2d D;
-  D(0, 0) = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x;
-  D(0, 1) = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
-  D(1, 0) = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
-  D(1, 1) = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x;
   Eigen::Matrix2d K;
   K << fx, s, 0, fy;
   Eigen::Matrix<double, 2, 3> P;
@@ -145,9 +140,8 @@ bool rigResidual(const double* intr, const Eigen::Matrix3d& R_wc, const Eigen::V
   out.J_board.rightCols<3>() = J_w;
   if (!intr_jacobian) return true;
   // d(xd, yd) / d(k1 k2 p1 p2 k3), then through K.
-  Eigen::Matrix<double, 2, 5> Dk;
-  Dk << x * r2, x * r2 * r2, 2.0 * x * y, r2 + 2.0 * x * x, x * r2 * r2 * r2,
-        y * r2, y * r2 * r2, r2 + 2.0 * y * y, 2.0 * x * y, y * r2 * r2 * r2;
+  Eigen::Matrix<double, 2, 5, Eigen::RowMajor> Dk;
+  lens::brownCoefficientJacobian(x, y, Dk.data());
   const Eigen::Matrix<double, 2, 5> Jk = -K * Dk;
   out.J_intr.setZero();
   out.J_intr(0, kFx) = -xd;

@@ -1,7 +1,7 @@
 #pragma once
 // The projection the intrinsic solve, view selection and uncertainty maps differentiate:
-// core/camera.h's model (OpenCV's Brown–Conrady, skew included) written once as a template so
-// that Ceres' Jets flow through it. Internal to previz_calib.
+// core/camera.h's camera (OpenCV's Brown–Conrady of core/lens_model.h, skew included) with Ceres'
+// Jets flowing through it. Internal to previz_calib.
 #include <cmath>
 
 #include <Eigen/Core>
@@ -9,6 +9,7 @@
 #include <ceres/rotation.h>
 
 #include "core/camera.h"
+#include "core/lens_model.h"
 
 namespace previz::calib::detail {
 
@@ -47,11 +48,8 @@ template <typename T>
 inline void projectCameraPoint(const T* intr, const T* p, double aspect, T* uv) {
   const T x = p[0] / p[2];
   const T y = p[1] / p[2];
-  const T r2 = x * x + y * y;
-  const T radial = T(1) + r2 * (intr[kK1] + r2 * (intr[kK2] + r2 * intr[kK3]));
-  const T xy = x * y;
-  const T xd = x * radial + T(2) * intr[kP1] * xy + intr[kP2] * (r2 + T(2) * x * x);
-  const T yd = y * radial + intr[kP1] * (r2 + T(2) * y * y) + T(2) * intr[kP2] * xy;
+  T xd, yd;
+  lens::brownDistort(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd);
   const T fy = aspect > 0 ? T(aspect) * intr[kFx] : intr[kFy];
   uv[0] = intr[kFx] * xd + intr[kSkew] * yd + intr[kCx];
   uv[1] = fy * yd + intr[kCy];

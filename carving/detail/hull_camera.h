@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "core/lens_model.h"
 #include "core/rig.h"
 
 namespace previz::carving::detail {
@@ -64,12 +65,7 @@ struct CameraModel {
   // Ideal normalized (x, y) -> pixel (u, v).
   inline void toPixel(double x, double y, double& u, double& v) const {
     double xd = x, yd = y;
-    if (distorted) {
-      const double r2 = x * x + y * y;
-      const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-      xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-      yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-    }
+    if (distorted) lens::brownDistort(k1, k2, p1, p2, k3, x, y, xd, yd);
     u = fx * xd + skew * yd + cx;
     v = fy * yd + cy;
   }
@@ -82,14 +78,9 @@ struct CameraModel {
   inline void pixelJacobian(double x, double y, double* J) const {
     double a = 1, b = 0, c = 0, d = 1;  // d distort / d x
     if (distorted) {
-      const double r2 = x * x + y * y;
-      const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-      // d radial / d x = dradial * x (and the same in y)
-      const double dradial = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3));
-      a = radial + x * dradial * x + 2.0 * p1 * y + 6.0 * p2 * x;
-      b = x * dradial * y + 2.0 * p1 * x + 2.0 * p2 * y;
-      c = y * dradial * x + 2.0 * p1 * x + 2.0 * p2 * y;
-      d = radial + y * dradial * y + 6.0 * p1 * y + 2.0 * p2 * x;
+      double xd, yd;
+      lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, x, y, xd, yd, a, b, d);
+      c = b;
     }
     J[0] = fx * a + skew * c;
     J[1] = fx * b + skew * d;

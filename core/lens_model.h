@@ -1,0 +1,195 @@
+#pragma once
+// The lens models, each defined once (issue 34): the map from ideal normalized coordinates
+// (x, y) = (X/Z, Y/Z) to distorted normalized coordinates, its Jacobian, and (lens_model.cpp) its
+// inverse with a convergence report. Templates on the scalar: double for the per-point paths,
+// float where a per-pixel loop wants it, ceres::Jet for the solvers (only +, -, *, /, sqrt, atan
+// and comparisons on the value are used). Every module that projects through a lens calls these;
+// none writes the polynomial again.
+//
+// Brown–Conrady, OpenCV's convention and coefficient order (k1 k2 p1 p2 k3):
+//   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+//   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2)
+//   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
+// Kannala–Brandt equidistant (OpenCV's fisheye module, Kalibr's "equidistant"), k1..k4:
+//   r = |(x, y)|, theta = atan(r), theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)
+//   (xd, yd) = (theta_d / r) (x, y)            ((x, y) itself at r = 0)
+// Angles up to 90 degrees off the axis (a 180-degree field of view) are what ideal normalized
+// coordinates can carry.
+#include <cmath>
+
+namespace previz {
+
+// How an inverse of a lens model ended (Camera::undistort, lens::kannalaBrandtUndistort).
+enum class InverseStatus {
+  kConverged,      // |distort(x) - xd| <= tolerance
+  kNotConverged,   // ran out of iterations while still improving (slow)
+  kDiverged,       // the iterate grew without bound or oscillated
+  kNotInvertible,  // xd lies outside the image of the invertible domain (past the turning point)
+};
+
+namespace lens {
+
+// ---- Brown–Conrady ------------------------------------------------------------------------
+
+// radial(r2) = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+template <typename T>
+inline T brownRadial(const T& k1, const T& k2, const T& k3, const T& r2) {
+  return T(1) + r2 * (k1 + r2 * (k2 + r2 * k3));
+}
+
+// d radial / d r2
+template <typename T>
+inline T brownRadialSlope(const T& k1, const T& k2, const T& k3, const T& r2) {
+  return k1 + r2 * (T(2) * k2 + r2 * (T(3) * k3));
+}
+
+// The tangential (decentring) terms.
+template <typename T>
+inline void brownTangential(const T& p1, const T& p2, const T& x, const T& y, T& tx, T& ty) {
+  const T xy = x * y, r2 = x * x + y * y;
+  tx = T(2) * p1 * xy + p2 * (r2 + T(2) * x * x);
+  ty = p1 * (r2 + T(2) * y * y) + T(2) * p2 * xy;
+}
+
+// Ideal normalized -> distorted normalized.
+template <typename T>
+inline void brownDistort(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3, const T& x,
+                         const T& y, T& xd, T& yd) {
+  const T radial = brownRadial(k1, k2, k3, x * x + y * y);
+  T tx, ty;
+  brownTangential(p1, p2, x, y, tx, ty);
+  xd = x * radial + tx;
+  yd = y * radial + ty;
+}
+
+// The same and d(xd, yd) / d(x, y) = [j00 j01; j01 j11] (symmetric) in one pass.
+template <typename T>
+inline void brownDistortWithJacobian(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3,
+                                     const T& x, const T& y, T& xd, T& yd, T& j00, T& j01, T& j11) {
+  const T x2 = x * x, y2 = y * y, xy = x * y, r2 = x2 + y2;
+  const T radial = brownRadial(k1, k2, k3, r2);
+  const T slope = brownRadialSlope(k1, k2, k3, r2);
+  T tx, ty;
+  brownTangential(p1, p2, x, y, tx, ty);
+  xd = x * radial + tx;
+  yd = y * radial + ty;
+  j00 = radial + T(2) * x2 * slope + T(2) * p1 * y + T(6) * p2 * x;
+  j01 = T(2) * xy * slope + T(2) * p1 * x + T(2) * p2 * y;
+  j11 = radial + T(2) * y2 * slope + T(6) * p1 * y + T(2) * p2 * x;
+}
+
+// d(xd, yd) / d(k1 k2 p1 p2 k3): rows xd, yd, row-major 2 x 5.
+template <typename T>
+inline void brownCoefficientJacobian(const T& x, const T& y, T* J) {
+  const T r2 = x * x + y * y, r4 = r2 * r2, xy = x * y;
+  J[0] = x * r2;
+  J[1] = x * r4;
+  J[2] = T(2) * xy;
+  J[3] = r2 + T(2) * x * x;
+  J[4] = x * r4 * r2;
+  J[5] = y * r2;
+  J[6] = y * r4;
+  J[7] = r2 + T(2) * y * y;
+  J[8] = T(2) * xy;
+  J[9] = y * r4 * r2;
+}
+
+// ---- Kannala–Brandt (equidistant) --------------------------------------------------------
+
+// theta_d(theta) = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)
+template <typename T>
+inline T kannalaBrandtTheta(const T& k1, const T& k2, const T& k3, const T& k4, const T& theta) {
+  const T t2 = theta * theta;
+  return theta * (T(1) + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))));
+}
+
+// d theta_d / d theta
+template <typename T>
+inline T kannalaBrandtThetaSlope(const T& k1, const T& k2, const T& k3, const T& k4, const T& theta) {
+  const T t2 = theta * theta;
+  return T(1) + t2 * (T(3) * k1 + t2 * (T(5) * k2 + t2 * (T(7) * k3 + t2 * (T(9) * k4))));
+}
+
+// Ideal normalized -> distorted normalized. Below r = 1e-8 the map is the identity to 1e-16.
+template <typename T>
+inline void kannalaBrandtDistort(const T& k1, const T& k2, const T& k3, const T& k4, const T& x, const T& y,
+                                 T& xd, T& yd) {
+  using std::atan;
+  using std::sqrt;
+  const T r2 = x * x + y * y;
+  if (!(r2 > T(1e-16))) {
+    xd = x;
+    yd = y;
+    return;
+  }
+  const T r = sqrt(r2);
+  const T scale = kannalaBrandtTheta(k1, k2, k3, k4, atan(r)) / r;
+  xd = x * scale;
+  yd = y * scale;
+}
+
+// The same and d(xd, yd) / d(x, y) = [j00 j01; j01 j11] (symmetric).
+template <typename T>
+inline void kannalaBrandtDistortWithJacobian(const T& k1, const T& k2, const T& k3, const T& k4, const T& x,
+                                             const T& y, T& xd, T& yd, T& j00, T& j01, T& j11) {
+  using std::atan;
+  using std::sqrt;
+  const T r2 = x * x + y * y;
+  if (!(r2 > T(1e-16))) {
+    xd = x;
+    yd = y;
+    j00 = j11 = T(1);
+    j01 = T(0);
+    return;
+  }
+  const T r = sqrt(r2);
+  const T theta = atan(r);
+  const T s = kannalaBrandtTheta(k1, k2, k3, k4, theta) / r;  // xd = s x
+  // ds/dr = (theta_d'(theta) / (1 + r^2) - s) / r; d s / d x = ds/dr x / r
+  const T ds_dr = (kannalaBrandtThetaSlope(k1, k2, k3, k4, theta) / (T(1) + r2) - s) / r;
+  const T g = ds_dr / r;
+  xd = x * s;
+  yd = y * s;
+  j00 = s + g * x * x;
+  j01 = g * x * y;
+  j11 = s + g * y * y;
+}
+
+// d(xd, yd) / d(k1 k2 k3 k4): rows xd, yd, row-major 2 x 4.
+template <typename T>
+inline void kannalaBrandtCoefficientJacobian(const T& x, const T& y, T* J) {
+  using std::atan;
+  using std::sqrt;
+  const T r2 = x * x + y * y;
+  if (!(r2 > T(1e-16))) {
+    for (int i = 0; i < 8; ++i) J[i] = T(0);
+    return;
+  }
+  const T r = sqrt(r2);
+  const T theta = atan(r), t2 = theta * theta;
+  T power = theta * t2;  // theta^3, ^5, ^7, ^9
+  for (int i = 0; i < 4; ++i) {
+    J[i] = x * power / r;
+    J[4 + i] = y * power / r;
+    power *= t2;
+  }
+}
+
+// ---- Inverses ------------------------------------------------------------------------------
+
+// Kannala–Brandt's inverse: theta from theta_d = |(xd, yd)| by Newton on the monotonic part of
+// theta_d(theta) (theta in [0, min(turning angle, 90 degrees))), then (x, y) = tan(theta) / theta_d
+// (xd, yd). max_theta: where theta_d stops increasing or pi/2, whichever is first
+// (kannalaBrandtMaxTheta). Reports as Camera::undistort does.
+struct KannalaBrandtInverse {
+  double x = 0, y = 0;  // ideal normalized
+  int iterations = 0;
+  double residual = 0;  // |theta_d(theta) - |xd|| (radians)
+  InverseStatus status = InverseStatus::kNotConverged;
+};
+double kannalaBrandtMaxTheta(double k1, double k2, double k3, double k4);
+KannalaBrandtInverse kannalaBrandtUndistort(double k1, double k2, double k3, double k4, double xd, double yd,
+                                            double max_theta, int max_iterations = 50, double tolerance = 1e-14);
+
+}  // namespace lens
+}  // namespace previz

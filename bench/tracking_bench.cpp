@@ -6,6 +6,14 @@
 // search (full frame only on the first frame), and with ROI plus a full frame every 30 frames; the
 // joint solve and the filter alone. It also checks that the ROI search found the same tags as the
 // full-frame search of the same frame in every camera.
+// The filter's lag and jitter (issue 33 item 4), on generated poses (tests/tracking/filter_motion.h,
+// no rendering): a prop turning 10 deg/frame about an axis 10 cm from its origin (sudden start and
+// stop, 50 runs) and a still prop (20 runs), at the crate's per-frame sigma 0.3 mm / 0.05 deg; the
+// filter as it is ("options":"default") and as it was before issue 33 ("legacy"), same seeds. Their
+// "ms" is the median time per frame of drawing the measurement and updating the filter; "lag_*"
+// the worst frame of the error averaged over the runs, "median_*" / "max_*" of the 3-D error
+// (units: mm, deg, and the per-frame sigma per axis), "jitter_*" the RMS spread of the still prop's
+// filtered pose over 100 frames after 10.
 // Besides Google Benchmark's table, one JSON line per case:
 //   {"stage":..., "size":..., "ms":..., "cpu_ms":..., "budget_ms":..., "threads":...}
 // "ms" is the median wall time per frame, "ms_max" the worst frame, "ms_mean" the mean, "cpu_ms"
@@ -14,6 +22,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <map>
@@ -22,6 +31,7 @@
 #include <thread>
 #include <vector>
 
+#include "tests/tracking/filter_motion.h"
 #include "tests/tracking/studio_fixture.h"
 #include "tracking/filter.h"
 #include "tracking/solve.h"
@@ -168,6 +178,51 @@ void BM_Filter(benchmark::State& state) {
   }
 }
 
+// Arg 0: 0 turn, 1 still; arg 1: 0 default options, 1 legacy.
+void BM_FilterFollow(benchmark::State& state) {
+  const bool turn = state.range(0) == 0, legacy = state.range(1) == 1;
+  const FilterOptions options = legacy ? test::legacyFilterOptions() : FilterOptions{};
+  constexpr double kSigmaDeg = 0.05, kSigmaMm = 0.3;
+  const double sr = kSigmaDeg * M_PI / 180, sp = 1e-3 * kSigmaMm;
+  constexpr unsigned kSeed = 33;
+  const int runs = turn ? 50 : 20;
+  const test::PropMotion motion = turn ? test::turnMotion(10, 0.1, 0) : test::PropMotion{};
+  for (auto _ : state) {
+    Result& res = results()[std::string("6_filter_") + (turn ? "turn" : "still") + (legacy ? "_legacy" : "")];
+    res.stage = turn ? "filter_turn" : "filter_still";
+    char extra[512];
+    if (turn) {
+      res.size = std::to_string(runs) + " runs x " + std::to_string(motion.truth.size()) + " frames";
+      double w = nowMs(), c = cpuMs();
+      test::runFilter(motion, options, sr, sp, runs, kSeed, [&](int, int, const Pose&, const Pose&, const Pose&) {
+        const double w1 = nowMs(), c1 = cpuMs();
+        res.ms.push_back(w1 - w);
+        res.cpu_ms.push_back(c1 - c);
+        w = w1;
+        c = c1;
+      });
+      const test::FollowFigures f = test::followMotion(motion, options, sr, sp, runs, kSeed);
+      std::snprintf(extra, sizeof(extra),
+                    "\"options\":\"%s\",\"motion\":\"%s\",\"sigma_mm\":%.2f,\"sigma_deg\":%.3f,\"lag_mm\":%.4f,"
+                    "\"lag_deg\":%.5f,\"lag_sigma_position\":%.3f,\"lag_sigma_rotation\":%.3f,\"median_mm\":%.4f,"
+                    "\"median_deg\":%.5f,\"max_mm\":%.4f,\"max_deg\":%.5f",
+                    legacy ? "legacy" : "default", motion.name.c_str(), kSigmaMm, kSigmaDeg, kSigmaMm * f.lag_position,
+                    kSigmaDeg * f.lag_rotation, f.lag_position, f.lag_rotation, kSigmaMm * f.median_position,
+                    kSigmaDeg * f.median_rotation, kSigmaMm * f.max_position, kSigmaDeg * f.max_rotation);
+    } else {
+      res.size = std::to_string(runs) + " runs x 110 frames";
+      const double w = nowMs(), c = cpuMs();
+      const test::Spread j = test::stillJitter(options, sr, sp, runs, kSeed);
+      res.ms.push_back((nowMs() - w) / (runs * 110));  // mean per frame: one number per run of the case
+      res.cpu_ms.push_back((cpuMs() - c) / (runs * 110));
+      std::snprintf(extra, sizeof(extra),
+                    "\"options\":\"%s\",\"sigma_mm\":%.2f,\"sigma_deg\":%.3f,\"jitter_mm\":%.4f,\"jitter_deg\":%.5f",
+                    legacy ? "legacy" : "default", kSigmaMm, kSigmaDeg, 1e3 * j.position_m, j.rotation_rad * 180 / M_PI);
+    }
+    res.extra = extra;
+  }
+}
+
 }  // namespace
 
 BENCHMARK(BM_TrackFullFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(1);
@@ -175,6 +230,7 @@ BENCHMARK(BM_TrackRoi)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iteration
 BENCHMARK(BM_TrackRoiPeriodicFull)->Arg(0)->Unit(benchmark::kMillisecond)->Iterations(2);
 BENCHMARK(BM_Solve)->Unit(benchmark::kMillisecond)->Iterations(200);
 BENCHMARK(BM_Filter)->Unit(benchmark::kMicrosecond)->Iterations(10000);
+BENCHMARK(BM_FilterFollow)->Args({0, 0})->Args({0, 1})->Args({1, 0})->Args({1, 1})->Unit(benchmark::kMillisecond)->Iterations(1);
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
@@ -209,6 +265,7 @@ int main(int argc, char** argv) {
     if (r.stage == "track_roi" && compared > 0)
       std::printf(",\"same_tags_frames\":%d,\"frames\":%d,\"same_tags_fraction\":%.4f", same, compared,
                   double(same) / compared);
+    if (!r.extra.empty()) std::printf(",%s", r.extra.c_str());
     std::printf("}\n");
   }
   return 0;

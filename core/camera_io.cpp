@@ -43,6 +43,36 @@ RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, c
   return rc;
 }
 
+// OpenCV 4.6's YAML reader never returns from some files whose lines go left of the first key
+// ("%YAML:1.0\n M:-0\n0\n0": the root map at column 1, then two lines at column 0; found by
+// fuzz/opencv_camera.cpp, fuzz/corpus/opencv_camera/hang-dedent-*.yaml). Such a line is not YAML
+// either (nothing but comments, directives and document markers may sit left of the root
+// collection), so it is refused before OpenCV sees it, naming the line.
+void checkYamlIndentation(const std::string& text, const fs::path& path) {
+  std::istringstream in(text);
+  std::string line;
+  size_t root = std::string::npos;  // column of the document's first key
+  int root_line = 0;
+  for (int number = 1; std::getline(in, line); ++number) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const size_t column = line.find_first_not_of(' ');
+    const char c = line[column];
+    if (c == '#' || c == '%') continue;
+    if (line.compare(column, 3, "---") == 0 || line.compare(column, 3, "...") == 0) {
+      root = std::string::npos;  // a new document
+      continue;
+    }
+    if (root == std::string::npos) {
+      root = column;
+      root_line = number;
+    } else if (column < root) {
+      throw Error("line " + std::to_string(number) + " starts left of the first key (line " +
+                      std::to_string(root_line) + ", column " + std::to_string(root + 1) + "): not YAML",
+                  cameraFileContext(path, "", ""));
+    }
+  }
+}
+
 }  // namespace
 
 cv::FileStorage openOpenCvStorage(const fs::path& path) {
@@ -50,12 +80,16 @@ cv::FileStorage openOpenCvStorage(const fs::path& path) {
   if (!fs::is_regular_file(path, ec)) throw Error("camera file does not exist", cameraFileContext(path, "", ""));
   std::string text = readTextFile(path);
   const std::string ext = lowerExtension(path);
-  // OpenCV refuses YAML without its "%YAML:1.0" first line; ROS camera_info files and hand-written
-  // ones have none.
-  if ((ext == ".yml" || ext == ".yaml") && text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n" + text;
   const int format = ext == ".json"  ? cv::FileStorage::FORMAT_JSON
                      : ext == ".xml" ? cv::FileStorage::FORMAT_XML
                                      : cv::FileStorage::FORMAT_AUTO;
+  // FORMAT_AUTO reads XML from '<' and JSON from '{', everything else as YAML.
+  const size_t first = text.find_first_not_of(" \t\r\n");
+  if (format == cv::FileStorage::FORMAT_AUTO && first != std::string::npos && text[first] != '<' && text[first] != '{')
+    checkYamlIndentation(text, path);
+  // OpenCV refuses YAML without its "%YAML:1.0" first line; ROS camera_info files and hand-written
+  // ones have none.
+  if ((ext == ".yml" || ext == ".yaml") && text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n" + text;
   cv::FileStorage store;
   try {
     if (!store.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | format))

@@ -16,6 +16,9 @@ namespace {
 
 bool isDigit(char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }
 
+// The most digits a frame number has in a file name (frameOf, findSequences) or a pattern.
+constexpr int kMaxFrameDigits = 15;
+
 // The last run of digits of a file name (before its extension when the extension has none):
 // [begin, end) into name, or {npos, npos}.
 std::pair<size_t, size_t> lastDigitRun(const std::string& name) {
@@ -47,7 +50,7 @@ std::optional<long long> SequencePattern::frameOf(const std::string& file_name) 
   if (file_name.compare(0, prefix.size(), prefix) != 0) return std::nullopt;
   if (file_name.compare(file_name.size() - suffix.size(), suffix.size(), suffix) != 0) return std::nullopt;
   const std::string digits = file_name.substr(prefix.size(), file_name.size() - prefix.size() - suffix.size());
-  if (digits.size() > 15 || !std::all_of(digits.begin(), digits.end(), isDigit)) return std::nullopt;
+  if (digits.size() > static_cast<size_t>(kMaxFrameDigits) || !std::all_of(digits.begin(), digits.end(), isDigit)) return std::nullopt;
   const long long frame = std::stoll(digits);
   if (fileName(frame) != file_name) return std::nullopt;  // "01" is not what %d writes
   return frame;
@@ -74,12 +77,17 @@ std::optional<SequencePattern> parsePattern(const std::string& text) {
         ++i;
         continue;
       }
+      // A field wider than a frame number can be is not a frame field: "%0700888889d" made
+      // every file name 700 MB (fuzz/take_strings.cpp), "%099999999999d" overflowed stoi.
+      if (k - j > 2) return std::nullopt;
       const int width = k > j ? std::stoi(text.substr(j, k - j)) : 0;
+      if (width > kMaxFrameDigits) return std::nullopt;
       if (!set(i, k + 1, zero ? width : 0)) return std::nullopt;
       i = k + 1;
     } else if (text[i] == '#') {
       size_t k = i;
       while (k < text.size() && text[k] == '#') ++k;
+      if (k - i > static_cast<size_t>(kMaxFrameDigits)) return std::nullopt;
       if (!set(i, k, static_cast<int>(k - i))) return std::nullopt;
       i = k;
     } else {
@@ -102,7 +110,7 @@ std::vector<FoundSequence> findSequences(const fs::path& dir) {
     if (!entry.is_regular_file(ec) || !isImageExtension(entry.path())) continue;
     const std::string name = entry.path().filename().string();
     const auto [begin, end] = lastDigitRun(name);
-    if (begin == std::string::npos || end - begin > 15) continue;
+    if (begin == std::string::npos || end - begin > static_cast<size_t>(kMaxFrameDigits)) continue;
     groups[{name.substr(0, begin), name.substr(end)}].push_back(name.substr(begin, end - begin));
   }
   std::vector<FoundSequence> found;

@@ -23,7 +23,7 @@ struct SequencePattern {
 };
 
 // Parses "name.%04d.exr", "name.%d.exr", "name.####.exr" (one field). nullopt when the text has
-// no frame field or more than one.
+// no frame field, more than one, or one wider than 15 digits.
 std::optional<SequencePattern> parsePattern(const std::string& text);
 
 // Image extensions a sequence may have (lower case, with the dot): .png .jpg .jpeg .tif .tiff

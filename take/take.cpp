@@ -24,6 +24,17 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// take.json "frames" at most (11.5 hours at 24 fps: a take is one shot), and how far an offset
+// may move a camera: source frame numbers have at most 15 digits (take/sequence.cpp), so
+// source - offset is exact.
+constexpr long long kMaxTakeFrames = 1'000'000;
+constexpr long long kMaxOffset = 1'000'000'000'000'000;
+constexpr const char* kOffsetRule = "offsets: an integer frame count per camera, at most 10^15 either way";
+bool isOffset(const nlohmann::json& v) {
+  if (v.is_number_unsigned()) return v.get<unsigned long long>() <= static_cast<unsigned long long>(kMaxOffset);
+  return v.is_number_integer() && v.get<long long>() >= -kMaxOffset && v.get<long long>() <= kMaxOffset;
+}
+
 using detail::findByStem;
 using detail::kStillExtensions;
 using detail::kVideoExtensions;
@@ -171,8 +182,12 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
   } else {
     fps_ = options_.default_fps;
   }
-  if (j.contains("frames") && (!j["frames"].is_number_integer() || j["frames"].get<long long>() < 0))
-    throw Error("frames must be an integer >= 0", takeJsonContext(tj, "frames"));
+  // Bounds keep the take's frame list finite and its arithmetic exact: "frames": 2000000000 listed
+  // two billion frames (minutes, gigabytes), a huge offset overflowed source - offset
+  // (fuzz/take_json.cpp).
+  if (j.contains("frames") && (!j["frames"].is_number_integer() || j["frames"].get<long long>() < 0 ||
+                               j["frames"].get<long long>() > kMaxTakeFrames))
+    throw Error("frames must be an integer from 0 to " + std::to_string(kMaxTakeFrames), takeJsonContext(tj, "frames"));
   for (const char* key : {"sources", "offsets", "roles"})
     if (j.contains(key) && !j[key].is_object())
       throw Error(std::string(key) + " must be an object {camera: ...}", takeJsonContext(tj, key));
@@ -234,7 +249,7 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
   // Offsets: given, take.json, timecode, none.
   const nlohmann::json offsets = j.value("offsets", nlohmann::json::object());
   for (const auto& [name, v] : offsets.items())
-    if (!v.is_number_integer()) throw Error("offsets: an integer frame count per camera", takeJsonContext(tj, "offsets", name));
+    if (!isOffset(v)) throw Error(kOffsetRule, takeJsonContext(tj, "offsets", name));
   std::optional<long long> t0;
   bool all_timecoded = true;
   std::map<std::string, long long> start_tc;
@@ -267,7 +282,7 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
       throw Error("expected {\"offsets\": {camera: frames}}", takeJsonContext(sync_json, "offsets"));
     estimated = sj["offsets"];
     for (const auto& [name, v] : estimated.items())
-      if (!v.is_number_integer()) throw Error("an integer frame count per camera", takeJsonContext(sync_json, "offsets", name));
+      if (!isOffset(v)) throw Error(kOffsetRule, takeJsonContext(sync_json, "offsets", name));
   }
   for (auto& [name, s] : streams_) {
     if (const auto it = options_.offsets.find(name); it != options_.offsets.end()) {
@@ -300,8 +315,9 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
   // take.json "frames": the take's length from its first frame (frames no camera has are then
   // listed too, and fail with every camera named).
   if (j.contains("frames")) {
-    const int first = frames.empty() ? 0 : *frames.begin();
-    for (int f = 0; f < j["frames"].get<int>(); ++f) frames.insert(first + f);
+    const long long first = frames.empty() ? 0 : *frames.begin();
+    const long long last = std::min<long long>(first + j["frames"].get<long long>(), std::numeric_limits<int>::max());
+    for (long long f = first; f < last; ++f) frames.insert(static_cast<int>(f));
   }
   frames_.assign(frames.begin(), frames.end());
 }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include <Eigen/Geometry>
@@ -126,6 +127,11 @@ std::vector<ChanKey> readChan(const std::filesystem::path& path) {
     if (n != 7 || (row >> rest) || std::round(v[0]) != v[0]) {
       c.field = "line " + std::to_string(number);
       throw Error("expected 'frame tx ty tz rx ry rz' (7 numbers, integer frame)", c);
+    }
+    // A frame beyond int made the conversion below undefined (fuzz/batch_chan.cpp).
+    if (!(v[0] >= std::numeric_limits<int>::min() && v[0] <= std::numeric_limits<int>::max())) {
+      c.field = "line " + std::to_string(number);
+      throw Error("frame " + line.substr(first, line.find_first_of(" \t", first) - first) + " is out of range", c);
     }
     ChanKey k;
     k.frame = static_cast<int>(v[0]);

@@ -8,8 +8,10 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -158,6 +160,36 @@ nlohmann::json readJsonFile(const fs::path& path) {
   } catch (const nlohmann::json::parse_error& e) {
     throw Error(std::string("not valid JSON: ") + e.what(), fileContext(path));
   }
+}
+
+std::optional<int> jsonInt(const nlohmann::json& v) {
+  if (v.is_number_unsigned()) {
+    const auto u = v.get<std::uint64_t>();
+    if (u <= static_cast<std::uint64_t>(std::numeric_limits<int>::max())) return static_cast<int>(u);
+  } else if (v.is_number_integer()) {
+    const auto i = v.get<std::int64_t>();
+    if (i >= std::numeric_limits<int>::min() && i <= std::numeric_limits<int>::max()) return static_cast<int>(i);
+  } else if (v.is_number_float()) {
+    const double d = v.get<double>();
+    if (d == std::floor(d) && d >= std::numeric_limits<int>::min() && d <= std::numeric_limits<int>::max())
+      return static_cast<int>(d);
+  }
+  return std::nullopt;
+}
+
+int jsonInt(const nlohmann::json& v, const ErrorContext& context) {
+  if (const std::optional<int> i = jsonInt(v)) return *i;
+  std::string shown = v.dump();
+  if (shown.size() > 40) shown = shown.substr(0, 37) + "...";
+  throw Error("expected an integer that fits an int, got " + shown, context);
+}
+
+std::vector<int> jsonInts(const nlohmann::json& v, const ErrorContext& context) {
+  if (!v.is_array()) throw Error(std::string("expected an array of integers, got ") + v.type_name(), context);
+  std::vector<int> out;
+  out.reserve(v.size());
+  for (const nlohmann::json& e : v) out.push_back(jsonInt(e, context));
+  return out;
 }
 
 cv::Mat readImage(const fs::path& path, int flags) {

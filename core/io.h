@@ -3,10 +3,14 @@
 // then rename), and image / EXR / JSON readers that throw previz::Error naming the file.
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+
+#include "core/error.h"
 
 namespace previz {
 
@@ -24,6 +28,15 @@ void writeImageAtomic(const std::filesystem::path& path, const cv::Mat& image);
 
 std::string readTextFile(const std::filesystem::path& path);
 nlohmann::json readJsonFile(const std::filesystem::path& path);
+
+// A JSON value as an int, checked. nlohmann's get<int>() (also value(key, 0) and
+// get<std::vector<int>>()) converts a float or a wider integer unchecked: 1e10 is undefined
+// behaviour, 4294967297 becomes 1 (found by fuzz/). An integer, or a float with an integral
+// value, that fits an int; else nullopt / an Error with 'context' saying what was there.
+std::optional<int> jsonInt(const nlohmann::json& v);
+int jsonInt(const nlohmann::json& v, const ErrorContext& context);
+// Every element of an array so (an Error for anything else).
+std::vector<int> jsonInts(const nlohmann::json& v, const ErrorContext& context);
 // cv::imread(path, flags) with a clear error (missing file / not an image / empty) naming the file.
 cv::Mat readImage(const std::filesystem::path& path, int flags = -1 /* IMREAD_UNCHANGED */);
 

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "core/io.h"
 
 namespace previz::tracking {
 
@@ -228,7 +229,8 @@ std::optional<CameraSample> cameraSampleFromOpenTrackIo(const nlohmann::json& j,
   s.T_stage_tracker.linear() = R * cvToOt();
   s.T_stage_tracker.translation() = t;
   s.pan_tilt_roll_deg = zxyFromTrackerRotation(s.T_stage_tracker.linear());
-  if (j.contains("sourceNumber") && j["sourceNumber"].is_number_integer()) s.source_number = j["sourceNumber"].get<int>();
+  if (j.contains("sourceNumber"))
+    if (const std::optional<int> n = jsonInt(j["sourceNumber"])) s.source_number = *n;
   if (j.contains("sourceId") && j["sourceId"].is_string()) s.source_id = j["sourceId"].get<std::string>();
   if (j.contains("lens") && j["lens"].is_object() && j["lens"].contains("encoders") && j["lens"]["encoders"].is_object()) {
     const nlohmann::json& e = j["lens"]["encoders"];
@@ -249,23 +251,32 @@ std::optional<CameraSample> cameraSampleFromOpenTrackIo(const nlohmann::json& j,
     }
     if (tm.contains("sampleRate") && tm["sampleRate"].is_object() && isNumber(tm["sampleRate"], "num") &&
         isNumber(tm["sampleRate"], "denom")) {
-      s.sample_rate_num = tm["sampleRate"]["num"].get<int>();
-      s.sample_rate_denom = std::max(1, tm["sampleRate"]["denom"].get<int>());
+      // Checked: a num of 1e300 was undefined behaviour in get<int>() (fuzz/opentrackio.cpp).
+      const std::optional<int> num = jsonInt(tm["sampleRate"]["num"]), denom = jsonInt(tm["sampleRate"]["denom"]);
+      if (!num || !denom) return bad("timing.sampleRate num and denom must be integers");
+      s.sample_rate_num = *num;
+      s.sample_rate_denom = std::max(1, *denom);
     }
     if (tm.contains("timecode") && tm["timecode"].is_object()) {
       const nlohmann::json& tc = tm["timecode"];
       SampleTimecode c;
-      try {
-        c.hours = tc.at("hours").get<int>();
-        c.minutes = tc.at("minutes").get<int>();
-        c.seconds = tc.at("seconds").get<int>();
-        c.frames = tc.at("frames").get<int>();
-        c.rate_num = tc.at("frameRate").at("num").get<int>();
-        c.rate_denom = tc.at("frameRate").at("denom").get<int>();
-        c.sub_frame = tc.value("subFrame", 0);
-        c.drop_frame = tc.value("dropFrame", false);
-      } catch (const std::exception&) {
-        return bad("timing.timecode lacks hours, minutes, seconds, frames or frameRate");
+      // Every field checked to be an integer that fits: "hours": 1e10 was undefined behaviour in
+      // get<int>() (fuzz/opentrackio.cpp).
+      const auto field = [&](const nlohmann::json& o, const char* key, int& out) {
+        if (!o.is_object() || !o.contains(key)) return false;
+        const std::optional<int> v = jsonInt(o[key]);
+        if (v) out = *v;
+        return v.has_value();
+      };
+      const nlohmann::json no_rate;
+      const nlohmann::json& rate = tc.contains("frameRate") ? tc["frameRate"] : no_rate;
+      if (!field(tc, "hours", c.hours) || !field(tc, "minutes", c.minutes) || !field(tc, "seconds", c.seconds) ||
+          !field(tc, "frames", c.frames) || !field(rate, "num", c.rate_num) || !field(rate, "denom", c.rate_denom))
+        return bad("timing.timecode lacks hours, minutes, seconds, frames or frameRate (integers)");
+      if (tc.contains("subFrame") && !field(tc, "subFrame", c.sub_frame)) return bad("timing.timecode.subFrame is not an integer");
+      if (tc.contains("dropFrame")) {
+        if (!tc["dropFrame"].is_boolean()) return bad("timing.timecode.dropFrame is not a boolean");
+        c.drop_frame = tc["dropFrame"].get<bool>();
       }
       if (c.rate_num <= 0 || c.rate_denom <= 0 || c.hours < 0 || c.minutes < 0 || c.seconds < 0 || c.frames < 0 ||
           c.sub_frame < 0)

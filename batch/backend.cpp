@@ -200,8 +200,12 @@ std::vector<Submission> readSubmissions(const Manifest& m) {
     try {
       const nlohmann::json j = nlohmann::json::parse(line);
       if (j.value("manifest_hash", "") != m.hash) continue;  // an earlier plan's
+      // Numbers checked first: a float beyond int / long long was undefined behaviour in get<>()
+      // (fuzz/batch_ledger.cpp).
+      if (!j.at("submitted_unix_ms").is_number_integer())
+        throw Error("submitted_unix_ms must be an integer", fileContext(file, "submitted_unix_ms"));
       subs.push_back({j.at("backend").get<std::string>(), j.at("job_id").get<std::string>(),
-                      j.at("shards").get<std::vector<int>>(), j.at("submitted_unix_ms").get<long long>()});
+                      jsonInts(j.at("shards"), fileContext(file, "shards")), j.at("submitted_unix_ms").get<long long>()});
     } catch (const nlohmann::json::exception& e) {
       throw Error(std::string("malformed submission line: ") + e.what(), fileContext(file));
     }

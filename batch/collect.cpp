@@ -141,12 +141,14 @@ std::vector<PropSample> readPropTrack(const fs::path& path) {
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     try {
       const nlohmann::json j = nlohmann::json::parse(line);
-      const int frame = j.at("frame").get<int>();
+      // Checked: a "frame" or "id" of 1e10 was undefined behaviour in get<int>()
+      // (fuzz/batch_prop_track.cpp).
+      const int frame = jsonInt(j.at("frame"), fileContext(path, "line " + std::to_string(number) + ": frame"));
       for (const auto& p : j.at("props")) {
         if (!p.contains("T_world_prop") || p["T_world_prop"].is_null()) continue;  // not seen
         PropSample s;
         s.frame = frame;
-        s.id = p.at("id").get<int>();
+        s.id = jsonInt(p.at("id"), fileContext(path, "line " + std::to_string(number) + ": props[].id"));
         s.name = p.value("name", "prop" + std::to_string(s.id));
         s.state = p.value("state", "");
         s.T_world_prop = poseFromJson(p.at("T_world_prop"), "T_world_prop");

@@ -2,6 +2,8 @@
 #include "batch/ledger.h"
 
 #include <algorithm>
+#include <optional>
+#include <stdexcept>
 
 #include "batch/hash.h"
 #include "core/error.h"
@@ -27,16 +29,25 @@ Ledger readLedger(const Manifest& manifest, int shard) {
   } catch (const Error&) {
     return ledger;  // a damaged ledger proves nothing: every frame is checked again
   }
-  if (j.value("manifest_hash", "") != manifest.hash || j.value("shard", -1) != shard) return ledger;
+  // Every number checked before it is converted: a "frame" of 1e10 or a "size" of -1.5 were
+  // undefined behaviour in get<int>() / get<std::uintmax_t>(), a non-string "manifest_hash" a
+  // type_error out of here (fuzz/batch_ledger.cpp). Anything malformed is a damaged ledger.
+  if (!j.is_object() || !j.contains("manifest_hash") || !j["manifest_hash"].is_string() ||
+      j["manifest_hash"].get<std::string>() != manifest.hash || !j.contains("shard") || jsonInt(j["shard"]) != shard)
+    return ledger;
   try {
     for (const auto& fj : j.at("frames")) {
       std::vector<LedgerFile> files;
-      for (const auto& f : fj.at("files"))
+      for (const auto& f : fj.at("files")) {
+        if (!f.at("size").is_number_unsigned()) throw std::invalid_argument("size");
         files.push_back({f.at("path").get<std::string>(), f.at("size").get<std::uintmax_t>(),
                          f.at("fnv1a64").get<std::string>()});
-      ledger.frames[fj.at("frame").get<int>()] = std::move(files);
+      }
+      const std::optional<int> frame = jsonInt(fj.at("frame"));
+      if (!frame) throw std::invalid_argument("frame");
+      ledger.frames[*frame] = std::move(files);
     }
-  } catch (const nlohmann::json::exception&) {
+  } catch (const std::exception&) {
     ledger.frames.clear();
   }
   return ledger;

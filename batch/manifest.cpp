@@ -365,9 +365,18 @@ Manifest manifestFromJson(const nlohmann::json& j, const std::string& file) {
     m.settings = j.at("settings");
     m.rig = j.at("rig").get<std::string>();
     m.props = j.at("props").get<std::string>();
-    for (const auto& f : j.at("inputs"))
+    // Numbers are checked before they are converted: a float beyond the type (a size of -1.5, a
+    // frame of 1e10) was undefined behaviour in get<>() (fuzz/batch_manifest.cpp).
+    const auto field = [&](const std::string& name) {
+      ErrorContext fc = c;
+      fc.field = name;
+      return fc;
+    };
+    for (const auto& f : j.at("inputs")) {
+      if (!f.at("size").is_number_unsigned()) throw Error("inputs: size must be an integer >= 0", field("inputs.size"));
       m.inputs.push_back({f.at("path").get<std::string>(), f.at("size").get<std::uintmax_t>(),
                           f.at("fnv1a64").get<std::string>()});
+    }
     m.inputs_hash = j.at("inputs_hash").get<std::string>();
     m.settings_hash = j.at("settings_hash").get<std::string>();
     m.hash = j.at("hash").get<std::string>();
@@ -375,7 +384,7 @@ Manifest manifestFromJson(const nlohmann::json& j, const std::string& file) {
       TakePlan t;
       t.name = tj.at("name").get<std::string>();
       t.dir = tj.at("dir").get<std::string>();
-      t.frames = tj.at("frames").get<std::vector<int>>();
+      t.frames = jsonInts(tj.at("frames"), field("takes.frames"));
       t.main_poses = tj.at("main_poses").get<std::string>();
       t.main_camera = tj.at("main_camera").get<std::string>();
       t.depth_cameras = tj.value("depth_cameras", std::vector<std::string>{});
@@ -390,13 +399,13 @@ Manifest manifestFromJson(const nlohmann::json& j, const std::string& file) {
     for (size_t i = 0; i < m.takes.size(); ++i) take_index[m.takes[i].name] = static_cast<int>(i);
     for (const auto& sj : j.at("shards")) {
       ShardPlan s;
-      s.id = sj.at("id").get<int>();
+      s.id = jsonInt(sj.at("id"), field("shards.id"));
       const std::string take = sj.at("take").get<std::string>();
       if (!take_index.count(take)) throw Error("shard names an unknown take '" + take + "'", c);
       s.take = take_index[take];
-      s.index = sj.at("index").get<int>();
-      s.count = sj.at("count").get<int>();
-      s.frames = sj.at("frames").get<std::vector<int>>();
+      s.index = jsonInt(sj.at("index"), field("shards.index"));
+      s.count = jsonInt(sj.at("count"), field("shards.count"));
+      s.frames = jsonInts(sj.at("frames"), field("shards.frames"));
       if (s.id != static_cast<int>(m.shards.size())) throw Error("shard ids must be 0, 1, 2, ... in order", c);
       m.shards.push_back(std::move(s));
     }

@@ -45,7 +45,7 @@ TakeReader::TakeReader(const carving::Take& take, const FrameLoop& loop, const T
       c.file = options_.tracked_main_poses.string();
       try {
         const nlohmann::json j = nlohmann::json::parse(line);
-        tracked_[j.at("frame").get<int>()] = poseFromJson(j.at("T_main0_main"), "T_main0_main");
+        tracked_[jsonInt(j.at("frame"), c)] = poseFromJson(j.at("T_main0_main"), "T_main0_main");
       } catch (const std::exception& e) {
         c.field = "line " + std::to_string(line_no);
         throw Error(std::string("bad tracked main pose: ") + e.what(), c);

@@ -187,7 +187,7 @@ TrackerOptions trackerOptionsFromJson(const nlohmann::json& j, const std::string
       else if (key == "match") o.match = value.get<std::string>();
       else if (key == "freed_zoom_raw") o.freed_zoom_raw = value.get<std::array<double, 2>>();
       else if (key == "freed_focus_raw") o.freed_focus_raw = value.get<std::array<double, 2>>();
-      else if (key == "source_number") o.source_number = value.get<int>();
+      else if (key == "source_number") o.source_number = jsonInt(value, ErrorContext{});
       else if (key == "report" || key == "sigma") continue;  // `tracker align` writes its evidence beside
       else throw Error("unknown key");
     } catch (const Error& e) {

@@ -75,7 +75,8 @@ std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
   forEachFrameLine(path, "props", expected, [&](const nlohmann::json& j, const ErrorContext& c) {
     if (!j["props"].is_array()) throw Error("expected " + expected, c);
     for (const auto& p : j["props"]) {
-      if (!p.is_object() || !p.contains("id") || !p["id"].is_number_integer() || !p.contains("T_world_prop"))
+      if (!p.is_object() || !p.contains("id") || !p["id"].is_number_integer() || !jsonInt(p["id"]) ||
+          !p.contains("T_world_prop"))
         throw Error("expected props entries {\"id\", \"T_world_prop\"}", c);
       out[j["frame"].get<int>()][p["id"].get<int>()] = poseFromJson(p["T_world_prop"], "T_world_prop");
     }

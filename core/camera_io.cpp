@@ -79,6 +79,11 @@ cv::FileStorage openOpenCvStorage(const fs::path& path) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw Error("camera file does not exist", cameraFileContext(path, "", ""));
   std::string text = readTextFile(path);
+  // OpenCV 4.6's parsers read the text as a C string beside its length: a NUL byte inside
+  // ("<?xml version=\0...") made the XML reader dereference null (fuzz/opencv_camera.cpp,
+  // fuzz/corpus/opencv_camera/segv-nul-byte.xml). No YAML, XML or JSON text holds one.
+  if (const size_t nul = text.find('\0'); nul != std::string::npos)
+    throw Error("a NUL byte at offset " + std::to_string(nul) + ": not a text file", cameraFileContext(path, "", ""));
   const std::string ext = lowerExtension(path);
   const int format = ext == ".json"  ? cv::FileStorage::FORMAT_JSON
                      : ext == ".xml" ? cv::FileStorage::FORMAT_XML

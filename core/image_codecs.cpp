@@ -32,6 +32,30 @@ namespace previz::detail {
 
 namespace {
 
+// OpenCV's limit or the value of its environment variable (loadsave.cpp reads them the same way).
+std::uint64_t ioLimit(const char* variable, std::uint64_t fallback) {
+  const char* v = std::getenv(variable);
+  if (!v || !*v) return fallback;
+  char* end = nullptr;
+  const unsigned long long n = std::strtoull(v, &end, 10);
+  return end && *end == '\0' && n > 0 ? n : fallback;
+}
+
+}  // namespace
+
+cv::Size checkedImageSize(std::uint64_t width, std::uint64_t height) {
+  static const std::uint64_t max_width = ioLimit("OPENCV_IO_MAX_IMAGE_WIDTH", 1u << 20);
+  static const std::uint64_t max_height = ioLimit("OPENCV_IO_MAX_IMAGE_HEIGHT", 1u << 20);
+  static const std::uint64_t max_pixels = ioLimit("OPENCV_IO_MAX_IMAGE_PIXELS", 1ull << 30);
+  if (width == 0 || height == 0 || width > max_width || height > max_height || width * height > max_pixels)
+    throw Error("image size " + std::to_string(width) + "x" + std::to_string(height) + " outside OpenCV's limits (1 to " +
+                std::to_string(max_width) + "x" + std::to_string(max_height) + ", " + std::to_string(max_pixels) +
+                " pixels; OPENCV_IO_MAX_IMAGE_WIDTH, _HEIGHT, _PIXELS)");
+  return cv::Size(static_cast<int>(width), static_cast<int>(height));
+}
+
+namespace {
+
 // ---- what cv::imread asks of a decoder (loadsave.cpp, imread_) ------------------------------
 
 // The flags decoded here: IMREAD_UNCHANGED, or any mix of COLOR, ANYDEPTH, ANYCOLOR and
@@ -55,13 +79,7 @@ int requestedType(int file_type, int flags) {
   return CV_MAKETYPE(CV_MAT_DEPTH(type), 1);
 }
 
-// validateInputImageSize: OpenCV's default limits (CV_IO_MAX_IMAGE_WIDTH, _HEIGHT, _PIXELS).
-cv::Size checkedSize(std::uint64_t width, std::uint64_t height) {
-  if (width == 0 || height == 0 || width > (1u << 20) || height > (1u << 20) || width * height > (1ull << 30))
-    throw Error("image size " + std::to_string(width) + "x" + std::to_string(height) +
-                " outside OpenCV's limits (1 to 2^20 pixels a side, 2^30 pixels)");
-  return cv::Size(static_cast<int>(width), static_cast<int>(height));
-}
+cv::Size checkedSize(std::uint64_t width, std::uint64_t height) { return checkedImageSize(width, height); }
 
 // ---- EXIF orientation (exif.cpp ExifReader, loadsave.cpp ApplyExifOrientation) ---------------
 

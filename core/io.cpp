@@ -289,8 +289,18 @@ ExrImage readExr(const fs::path& path) {
     Imf::InputFile file(path.c_str());
     const Imf::Header& header = file.header();
     const Imath::Box2i dw = header.dataWindow();
-    const int width = dw.max.x - dw.min.x + 1;
-    const int height = dw.max.y - dw.min.y + 1;
+    // The data window within OpenCV's image limits before anything is allocated: a 600-byte
+    // file declaring a huge window made this allocate and zero gigabytes, and max - min + 1
+    // could overflow int (fuzz/exr.cpp).
+    const std::int64_t w64 = std::int64_t{dw.max.x} - dw.min.x + 1, h64 = std::int64_t{dw.max.y} - dw.min.y + 1;
+    if (w64 <= 0 || h64 <= 0) throw Error("EXR data window is empty", fileContext(path));
+    cv::Size size;
+    try {
+      size = detail::checkedImageSize(static_cast<std::uint64_t>(w64), static_cast<std::uint64_t>(h64));
+    } catch (const Error& e) {
+      throw Error("EXR data window " + e.message(), fileContext(path));
+    }
+    const int width = size.width, height = size.height;
 
     std::vector<std::string> names;
     for (auto it = header.channels().begin(); it != header.channels().end(); ++it)

@@ -7,6 +7,7 @@
 // format, and the few cases OpenCV treats with code of its own (CMYK JPEG, an image rotated by
 // an EXIF orientation OpenCV would parse differently, PNG with an eXIf chunk), are left to OpenCV
 // through the previz_imgcodecs plugin (core/io.cpp).
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -18,6 +19,13 @@ namespace previz::detail {
 // codecs leave the bytes or the flags to OpenCV. Throws Error (no file context) when the bytes
 // are a PNG or JPEG that does not decode (corrupt, truncated), saying why.
 std::optional<cv::Mat> decodeImage(const std::string& bytes, int flags);
+
+// validateInputImageSize (loadsave.cpp): width, height within OpenCV's limits, 2^20 a side and
+// 2^30 pixels unless the environment's OPENCV_IO_MAX_IMAGE_WIDTH, _HEIGHT, _PIXELS say otherwise
+// (read once, as OpenCV reads them). Throws Error (no file context) outside them. The EXR reader
+// (core/io.cpp) applies them too: a 600-byte file declaring a huge data window made it allocate
+// and zero gigabytes (fuzz/exr.cpp).
+cv::Size checkedImageSize(std::uint64_t width, std::uint64_t height);
 
 // cv::imencode(ext, image) without parameters for ".png" and ".jpg" / ".jpeg" / ".jpe" (any
 // case); nullopt for any other extension. Throws Error (no file context) for an image these

@@ -10,7 +10,9 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -542,7 +544,15 @@ TrackerRecording readRecording(const std::filesystem::path& path) {
         else if (p == "otio") r.protocol = StreamProtocol::kOpenTrackIo;
         else throw Error("protocol must be freed or otio (got '" + p + "')");
         r.url = j.value("url", "");
-        r.started_unix_ms = j.value("started_unix_ms", 0LL);
+        if (j.contains("started_unix_ms")) {
+          // An integer that fits: 1.7e23 was undefined behaviour in get<long long>()
+          // (fuzz/tracker_recording.cpp).
+          const nlohmann::json& ms = j["started_unix_ms"];
+          if (!ms.is_number_integer() ||
+              (ms.is_number_unsigned() && ms.get<std::uint64_t>() > std::uint64_t{std::numeric_limits<long long>::max()}))
+            throw Error("started_unix_ms must be an integer (milliseconds)");
+          r.started_unix_ms = ms.get<long long>();
+        }
         header = true;
         continue;
       }

@@ -157,7 +157,9 @@ nlohmann::json readJsonFile(const fs::path& path) {
   const std::string text = readTextFile(path);
   try {
     return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {
+    // parse_error, and out_of_range 406 for a number beyond double (1e999), which escaped
+    // without the file's name (fuzz/: rig_json, board_json, props_json, ... PREVIZ_FUZZ_STRICT).
     throw Error(std::string("not valid JSON: ") + e.what(), fileContext(path));
   }
 }

@@ -876,7 +876,9 @@ namespace {
 void skipCountLine(std::vector<std::pair<int, std::vector<std::string>>>& rows, const fs::path& path) {
   if (rows.empty() || rows.front().second.size() != 1) return;
   const std::string& s = rows.front().second[0];
-  if (s.find_first_not_of("0123456789") != std::string::npos)
+  // Digits only, and few enough for a long: "99999999999999999999" threw std::out_of_range from
+  // std::stol, an error naming neither file nor line (fuzz/camera_rows.cpp, PREVIZ_FUZZ_STRICT).
+  if (s.find_first_not_of("0123456789") != std::string::npos || s.size() > 9)
     throw Error(lineTag(rows.front().first) + "a one-token line must be the camera count, got '" + s + "'",
                 cameraFileContext(path, "", "count"));
   const long count = std::stol(s);

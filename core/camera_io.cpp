@@ -48,27 +48,43 @@ RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, c
 // fuzz/opencv_camera.cpp, fuzz/corpus/opencv_camera/hang-dedent-*.yaml). Such a line is not YAML
 // either (nothing but comments, directives and document markers may sit left of the root
 // collection), so it is refused before OpenCV sees it, naming the line.
+// The same reader also never returns when a document end marker "..." is followed by anything
+// but "---" or the end (it loops on a '-': "a: 1\n...-]\n-", fuzz/corpus/opencv_camera/
+// hang-after-document-end.yaml): text after "..." is refused too.
 void checkYamlIndentation(const std::string& text, const fs::path& path) {
+  const auto refuse = [&](int number, const std::string& what) {
+    throw Error("line " + std::to_string(number) + " " + what, cameraFileContext(path, "", ""));
+  };
   std::istringstream in(text);
   std::string line;
   size_t root = std::string::npos;  // column of the document's first key
-  int root_line = 0;
+  int root_line = 0, end_line = 0;   // end_line: the last "..." not yet followed by "---"
   for (int number = 1; std::getline(in, line); ++number) {
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     const size_t column = line.find_first_not_of(' ');
     const char c = line[column];
     if (c == '#' || c == '%') continue;
-    if (line.compare(column, 3, "---") == 0 || line.compare(column, 3, "...") == 0) {
+    if (line.compare(column, 3, "---") == 0) {
       root = std::string::npos;  // a new document
+      end_line = 0;
+      continue;
+    }
+    if (end_line)
+      refuse(number, "follows the document end '...' (line " + std::to_string(end_line) + "): not YAML");
+    if (line.compare(column, 3, "...") == 0) {
+      const size_t rest = line.find_first_not_of(" \t\r", column + 3);
+      if (rest != std::string::npos && line[rest] != '#')
+        refuse(number, "has text after the document end '...': not YAML");
+      root = std::string::npos;
+      end_line = number;
       continue;
     }
     if (root == std::string::npos) {
       root = column;
       root_line = number;
     } else if (column < root) {
-      throw Error("line " + std::to_string(number) + " starts left of the first key (line " +
-                      std::to_string(root_line) + ", column " + std::to_string(root + 1) + "): not YAML",
-                  cameraFileContext(path, "", ""));
+      refuse(number, "starts left of the first key (line " + std::to_string(root_line) + ", column " +
+                         std::to_string(root + 1) + "): not YAML");
     }
   }
 }

@@ -43,10 +43,16 @@ std::uint64_t ioLimit(const char* variable, std::uint64_t fallback) {
 
 }  // namespace
 
+const ImageLimits& imageLimits() {
+  static const ImageLimits limits{ioLimit("OPENCV_IO_MAX_IMAGE_WIDTH", 1u << 20),
+                                  ioLimit("OPENCV_IO_MAX_IMAGE_HEIGHT", 1u << 20),
+                                  ioLimit("OPENCV_IO_MAX_IMAGE_PIXELS", 1ull << 30)};
+  return limits;
+}
+
 cv::Size checkedImageSize(std::uint64_t width, std::uint64_t height) {
-  static const std::uint64_t max_width = ioLimit("OPENCV_IO_MAX_IMAGE_WIDTH", 1u << 20);
-  static const std::uint64_t max_height = ioLimit("OPENCV_IO_MAX_IMAGE_HEIGHT", 1u << 20);
-  static const std::uint64_t max_pixels = ioLimit("OPENCV_IO_MAX_IMAGE_PIXELS", 1ull << 30);
+  const std::uint64_t max_width = imageLimits().width, max_height = imageLimits().height,
+                      max_pixels = imageLimits().pixels;
   if (width == 0 || height == 0 || width > max_width || height > max_height || width * height > max_pixels)
     throw Error("image size " + std::to_string(width) + "x" + std::to_string(height) + " outside OpenCV's limits (1 to " +
                 std::to_string(max_width) + "x" + std::to_string(max_height) + ", " + std::to_string(max_pixels) +

@@ -283,10 +283,76 @@ void writeExr(const fs::path& path, const ExrImage& exr) {
   }
 }
 
+namespace {
+
+// OpenEXR 3.1 sizes each header attribute as the file declares before reading it (a string
+// attribute claiming 2 GB in a 610-byte file: TypedAttribute<std::string>::readValueFrom
+// allocated 2 GB; fuzz/exr.cpp, fuzz/corpus/exr/oom-attribute-size.exr). The headers are walked
+// first (magic, version, then per attribute: name\0 type\0 int32 size, value; an empty name
+// ends a header; multi-part files have several, ended by an empty one) and every size checked
+// against the file's length.
+void checkExrHeaders(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  in.seekg(0, std::ios::end);
+  const std::int64_t length = in.tellg();
+  in.seekg(0);
+  unsigned char start[8];
+  if (!in.read(reinterpret_cast<char*>(start), 8))
+    throw Error("not an EXR file (shorter than its header)", fileContext(path));
+  if (start[0] != 0x76 || start[1] != 0x2f || start[2] != 0x31 || start[3] != 0x01)
+    throw Error("not an EXR file (no magic number)", fileContext(path));
+  const bool multipart = (start[5] & 0x10) != 0;  // version field bit 12
+  const auto readName = [&](std::string& name) {
+    name.clear();
+    for (char c; in.get(c);) {
+      if (c == '\0') return true;
+      if (name.size() >= 255) return false;
+      name += c;
+    }
+    return false;
+  };
+  for (;;) {  // headers
+    std::string name, type;
+    int attributes = 0;
+    for (;; ++attributes) {
+      if (!readName(name)) throw Error("EXR header cut short or malformed", fileContext(path));
+      if (name.empty()) break;
+      unsigned char size_le[4];
+      if (!readName(type) || !in.read(reinterpret_cast<char*>(size_le), 4))
+        throw Error("EXR header cut short or malformed (attribute '" + name + "')", fileContext(path));
+      const std::int32_t size = static_cast<std::int32_t>(std::uint32_t{size_le[0]} | std::uint32_t{size_le[1]} << 8 |
+                                                          std::uint32_t{size_le[2]} << 16 |
+                                                          std::uint32_t{size_le[3]} << 24);
+      if (size < 0 || static_cast<std::int64_t>(in.tellg()) + size > length)
+        throw Error("EXR attribute '" + name + "' declares " + std::to_string(size) +
+                        " bytes, more than the file holds",
+                    fileContext(path));
+      in.seekg(size, std::ios::cur);
+    }
+    if (!multipart || attributes == 0) return;
+  }
+}
+
+}  // namespace
+
 ExrImage readExr(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error("EXR file does not exist", fileContext(path));
   ExrImage exr;
+  // OpenEXR allocates line-offset tables and tile buffers from the header while opening, before
+  // the check below: its own limits (unlimited by default) are set to OpenCV's once, so that a
+  // header declaring a huge image or tile fails in the constructor (fuzz/exr.cpp).
+  static const bool limited = [] {
+    const detail::ImageLimits& l = detail::imageLimits();
+    const auto side = [](std::uint64_t v) {
+      return static_cast<int>(std::min<std::uint64_t>(v, std::numeric_limits<int>::max()));
+    };
+    Imf::Header::setMaxImageSize(side(l.width), side(l.height));
+    Imf::Header::setMaxTileSize(side(l.width), side(l.height));
+    return true;
+  }();
+  (void)limited;
+  checkExrHeaders(path);
   try {
     Imf::InputFile file(path.c_str());
     const Imf::Header& header = file.header();
@@ -348,13 +414,12 @@ ExrImage readExr(const fs::path& path) {
     exr.channels = names;
     exr.image = cv::Mat(height, width, CV_32FC(n), cv::Scalar::all(0));
     Imf::FrameBuffer fb;
-    // OpenEXR addresses the buffer with absolute data-window coordinates.
-    char* base = reinterpret_cast<char*>(exr.image.data) -
-                 static_cast<std::ptrdiff_t>(dw.min.x) * n * sizeof(float) -
-                 static_cast<std::ptrdiff_t>(dw.min.y) * exr.image.step[0];
+    // OpenEXR addresses the buffer with absolute data-window coordinates; Slice::Make takes the
+    // window's first pixel and does that arithmetic itself (computing base = data - min here was
+    // undefined pointer overflow for a window far from the origin; fuzz/exr.cpp).
     for (int c = 0; c < n; ++c)
-      fb.insert(names[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float), n * sizeof(float),
-                                     exr.image.step[0]));
+      fb.insert(names[c], Imf::Slice::Make(Imf::FLOAT, exr.image.data + c * sizeof(float), dw, n * sizeof(float),
+                                           exr.image.step[0]));
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);
   } catch (const Error&) {

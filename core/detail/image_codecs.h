@@ -25,6 +25,10 @@ std::optional<cv::Mat> decodeImage(const std::string& bytes, int flags);
 // (read once, as OpenCV reads them). Throws Error (no file context) outside them. The EXR reader
 // (core/io.cpp) applies them too: a 600-byte file declaring a huge data window made it allocate
 // and zero gigabytes (fuzz/exr.cpp).
+struct ImageLimits {
+  std::uint64_t width, height, pixels;
+};
+const ImageLimits& imageLimits();
 cv::Size checkedImageSize(std::uint64_t width, std::uint64_t height);
 
 // cv::imencode(ext, image) without parameters for ".png" and ".jpg" / ".jpeg" / ".jpe" (any

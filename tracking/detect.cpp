@@ -471,10 +471,14 @@ struct TagDetector::Impl {
     const size_t first = out.size();
     const size_t before = second ? last_run_first : out.size();
     last_run_first = out.size();
-    if (image.channels() == 3)
-      cv::cvtColor(image, search, cv::COLOR_BGR2GRAY);
-    else
-      image.copyTo(search);
+    // The second pass runs only where the first searched without blur, which leaves 'search'
+    // as it converted it: the same grey, not converted again.
+    if (!second) {
+      if (image.channels() == 3)
+        cv::cvtColor(image, search, cv::COLOR_BGR2GRAY);
+      else
+        image.copyTo(search);
+    }
     image_u8_t im{search.cols, search.rows, static_cast<int32_t>(search.step[0]), search.ptr<uint8_t>()};
     Detections dets(apriltag_detector_detect(second ? td_plain : td, &im));
     for (int k = 0; k < zarray_size(dets.get()); ++k) {

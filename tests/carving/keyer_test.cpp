@@ -295,7 +295,8 @@ TEST(KeyerStudio, NoScreenSetKeyedByDifferenceAgainstTheCleanPlate) {
       const std::string source = name + " t=" + std::to_string(t);
       double v[2];
       for (int k = 0; k < 2; ++k) {
-        const synth::RenderedView view = studios[k]->render(cam, t, synth::kLayersPlate, true, 0.0, {}, kGain[i]);
+        const synth::RenderedView view = studios[k]->render(cam, t, synth::kLayersPlate, true, 0.0, Eigen::Vector2d::Zero(),
+                                                                     kGain[i]);
         const cv::Mat frame =
             studios[k]->render(cam, t, synth::kLayersPlate, false, 2.0, Eigen::Vector2d::Zero(), kGain[i]).bgr;
         const cv::Mat truth = foregroundTruth(view.labels);

@@ -34,6 +34,7 @@ namespace fs = std::filesystem;
 struct CalibArgs {
   // intrinsics
   std::string images, board, out, report, lock, loss = "huber", select_method = "uncertainty";
+  std::string model = "brown-conrady";  // calib intrinsics --model
   std::string layout;  // calib board --layout
   std::string camera_name;
   int select = 0;
@@ -108,6 +109,13 @@ int runIntrinsics(const CalibArgs& a) {
   const BoardSpec board = readBoard(a.board);
   calib::IntrinsicsOptions solve;
   solve.locks = calib::IntrinsicLocks::parse(a.lock);
+  try {
+    solve.model = lensModelFromString(a.model);
+  } catch (const Error& e) {
+    ErrorContext context;
+    context.field = "--model";
+    throw Error("calib: " + e.message(), context);
+  }
   solve.loss = calib::robustLossFromString(a.loss);
   solve.loss_scale_px = a.loss_scale_px;
   solve.camera_name = a.camera_name.empty() ? fs::path(a.out).stem().string() : a.camera_name;
@@ -116,6 +124,7 @@ int runIntrinsics(const CalibArgs& a) {
   selection.method = calib::selectionMethodFromString(a.select_method);
   selection.views = std::max(1, a.select);
   selection.locks = solve.locks;
+  selection.model = solve.model;
   selection.validate();
   if (a.refine < 0) {
     ErrorContext context;
@@ -352,9 +361,13 @@ Runner addCalibCommand(CLI::App& app) {
       ->capture_default_str();
   in->add_option("--refine", a->refine, "Rounds of frontal refinement (Datta et al. 2009; 0 = none)")
       ->capture_default_str();
+  in->add_option("--model", a->model,
+                 "Lens model: brown (Brown-Conrady k1 k2 p1 p2 k3, OpenCV's calibrateCamera) or fisheye "
+                 "(Kannala-Brandt k1..k4, OpenCV's fisheye module, Kalibr's equidistant)")
+      ->capture_default_str();
   in->add_option("--lock", a->lock,
                  "Held parameters, comma-separated: fix_focal, fix_aspect, fix_principal_point, "
-                 "fix_k1, fix_k2, fix_k3, fix_tangential, fix_radial, fix_distortion, free_skew");
+                 "fix_k1, fix_k2, fix_k3, fix_k4 (fisheye), fix_tangential, fix_radial, fix_distortion, free_skew");
   in->add_option("--loss", a->loss, "Robust loss: huber | cauchy | none")->capture_default_str();
   in->add_option("--loss-scale", a->loss_scale_px, "Robust loss scale, px")->capture_default_str();
   in->add_flag("--keep-soft", a->keep_soft, "Keep views the focus measure calls soft");

@@ -17,7 +17,7 @@
 namespace previz::calib {
 
 const std::array<const char*, kIntrinsicCount> kIntrinsicNames = {
-    "fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"};
+    "fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3", "k4"};
 
 namespace {
 
@@ -28,6 +28,7 @@ using detail::kFy;
 using detail::kK1;
 using detail::kK2;
 using detail::kK3;
+using detail::kK4;
 using detail::kP1;
 using detail::kP2;
 using detail::kSkew;
@@ -45,14 +46,14 @@ std::string fmt(const char* format, double v) {
 }
 
 struct ReprojectionCost {
-  ReprojectionCost(const Eigen::Vector3d& p_board, const Eigen::Vector2d& px, double aspect)
-      : p_board_(p_board), px_(px), aspect_(aspect) {}
+  ReprojectionCost(const Eigen::Vector3d& p_board, const Eigen::Vector2d& px, double aspect, LensModel model)
+      : p_board_(p_board), px_(px), aspect_(aspect), model_(model) {}
 
   template <typename T>
   bool operator()(const T* intr, const T* pose, T* residual) const {
     const T p[3] = {T(p_board_.x()), T(p_board_.y()), T(p_board_.z())};
     T uv[2];
-    detail::projectBoardPoint(intr, pose, p, aspect_, uv);
+    detail::projectBoardPoint(intr, pose, p, aspect_, model_, uv);
     residual[0] = T(px_.x()) - uv[0];
     residual[1] = T(px_.y()) - uv[1];
     return true;
@@ -61,11 +62,12 @@ struct ReprojectionCost {
   Eigen::Vector3d p_board_;
   Eigen::Vector2d px_;
   double aspect_;
+  LensModel model_;
 };
 
 struct PoseOnlyCost {
-  PoseOnlyCost(const double* intr, const Eigen::Vector3d& p_board, const Eigen::Vector2d& px)
-      : p_board_(p_board), px_(px) {
+  PoseOnlyCost(const double* intr, LensModel model, const Eigen::Vector3d& p_board, const Eigen::Vector2d& px)
+      : model_(model), p_board_(p_board), px_(px) {
     std::copy(intr, intr + kIntrinsicCount, intr_);
   }
   template <typename T>
@@ -74,12 +76,13 @@ struct PoseOnlyCost {
     for (int i = 0; i < kIntrinsicCount; ++i) intr[i] = T(intr_[i]);
     const T p[3] = {T(p_board_.x()), T(p_board_.y()), T(p_board_.z())};
     T uv[2];
-    detail::projectBoardPoint(intr, pose, p, 0.0, uv);
+    detail::projectBoardPoint(intr, pose, p, 0.0, model_, uv);
     residual[0] = T(px_.x()) - uv[0];
     residual[1] = T(px_.y()) - uv[1];
     return true;
   }
   double intr_[kIntrinsicCount];
+  LensModel model_;
   Eigen::Vector3d p_board_;
   Eigen::Vector2d px_;
 };
@@ -99,9 +102,9 @@ struct SolvePoint {
 };
 
 Eigen::Vector2d residualAt(const double* intr, const std::array<double, 6>& pose,
-                           const SolvePoint& p, double aspect) {
+                           const SolvePoint& p, double aspect, LensModel model) {
   double uv[2];
-  detail::projectBoardPoint(intr, pose.data(), p.p_board.data(), aspect, uv);
+  detail::projectBoardPoint(intr, pose.data(), p.p_board.data(), aspect, model, uv);
   return p.px - Eigen::Vector2d(uv[0], uv[1]);
 }
 
@@ -150,21 +153,48 @@ std::unordered_map<int, Eigen::Vector3d> boardPointMap(const BoardSpec& board) {
 
 // refine: polish through previz's model (skew included); the bundle adjustment does it anyway
 // for the poses it starts from.
-std::optional<std::array<double, 6>> pnp(const double* intr, const ViewPoints& vp, bool refine) {
+std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, const ViewPoints& vp, bool refine) {
   if (vp.ids.size() < 4) return std::nullopt;
   std::vector<cv::Point3d> object;
   std::vector<cv::Point2d> image;
-  for (size_t i = 0; i < vp.ids.size(); ++i) {
-    object.emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
-    image.emplace_back(vp.px[i].x(), vp.px[i].y());
+  cv::Matx33d K(intr[kFx], intr[kSkew], intr[kCx], 0, intr[kFy], intr[kCy], 0, 0, 1);
+  cv::Vec<double, 5> dist(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3]);
+  Camera camera;
+  detail::vectorToCamera(intr, model, camera);
+  if (model == LensModel::kBrownConrady) {
+    for (size_t i = 0; i < vp.ids.size(); ++i) {
+      image.emplace_back(vp.px[i].x(), vp.px[i].y());
+      object.emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
+    }
+  } else {
+    // OpenCV's solvePnP knows Brown-Conrady only: other lenses are undistorted here and solved
+    // as a pinhole on ideal normalized coordinates, from the points within 60 degrees of the
+    // axis where there are enough (near 90 degrees those coordinates run off to infinity).
+    std::vector<cv::Point3d> far_object;
+    std::vector<cv::Point2d> far_image;
+    for (size_t i = 0; i < vp.ids.size(); ++i) {
+      const InverseResult r = camera.undistort(camera.pixelToNormalized(vp.px[i]));
+      if (!r.ok()) continue;
+      const bool near_axis = r.point.squaredNorm() <= 3.0;  // tan^2 60 degrees
+      (near_axis ? image : far_image).emplace_back(r.point.x(), r.point.y());
+      (near_axis ? object : far_object).emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
+    }
+    if (object.size() < 6) {
+      object.insert(object.end(), far_object.begin(), far_object.end());
+      image.insert(image.end(), far_image.begin(), far_image.end());
+    }
   }
-  const cv::Matx33d K(intr[kFx], intr[kSkew], intr[kCx], 0, intr[kFy], intr[kCy], 0, 0, 1);
-  const cv::Vec<double, 5> dist(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3]);
+  if (object.size() < 4) return std::nullopt;
+  if (model != LensModel::kBrownConrady) {
+    K = cv::Matx33d::eye();
+    dist = cv::Vec<double, 5>::all(0.0);
+  }
   cv::Vec3d rvec, tvec;
   bool ok = false;
   try {
     ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_IPPE);
-    if (!ok) ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
+    // IPPE can return the mirror solution behind the camera (a board seen across a wide angle).
+    if (!ok || !(tvec[2] > 0)) ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
   } catch (const cv::Exception&) {
     ok = false;
   }
@@ -174,7 +204,7 @@ std::optional<std::array<double, 6>> pnp(const double* intr, const ViewPoints& v
   ceres::Problem problem;
   for (size_t i = 0; i < vp.ids.size(); ++i) {
     problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PoseOnlyCost, 2, 6>(
-                                 new PoseOnlyCost(intr, vp.p_board[i], vp.px[i])),
+                                 new PoseOnlyCost(intr, model, vp.p_board[i], vp.px[i])),
                              nullptr, pose.data());
   }
   ceres::Solver::Options so;
@@ -214,16 +244,17 @@ IntrinsicLocks IntrinsicLocks::parse(const std::string& list) {
     else if (name == "fix_k1") locks.fix_k1 = true;
     else if (name == "fix_k2") locks.fix_k2 = true;
     else if (name == "fix_k3") locks.fix_k3 = true;
+    else if (name == "fix_k4") locks.fix_k4 = true;
     else if (name == "fix_tangential") locks.fix_tangential = true;
-    else if (name == "fix_radial") locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = true;
+    else if (name == "fix_radial") locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = true;
     else if (name == "fix_distortion")
-      locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_tangential = true;
+      locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = locks.fix_tangential = true;
     else {
       ErrorContext context;
       context.field = "lock";
       throw Error("calibrate: unknown lock '" + name +
                       "' (known: fix_focal, fix_aspect, fix_principal_point, fix_skew, free_skew, "
-                      "fix_k1, fix_k2, fix_k3, fix_tangential, fix_radial, fix_distortion)",
+                      "fix_k1, fix_k2, fix_k3, fix_k4, fix_tangential, fix_radial, fix_distortion)",
                   context);
     }
   }
@@ -239,13 +270,14 @@ std::string IntrinsicLocks::toString() const {
   if (fix_k1) names.push_back("fix_k1");
   if (fix_k2) names.push_back("fix_k2");
   if (fix_k3) names.push_back("fix_k3");
+  if (fix_k4) names.push_back("fix_k4");
   if (fix_tangential) names.push_back("fix_tangential");
   std::string out;
   for (const auto& n : names) out += (out.empty() ? "" : ",") + n;
   return out;
 }
 
-std::array<bool, kIntrinsicCount> IntrinsicLocks::heldMask() const {
+std::array<bool, kIntrinsicCount> IntrinsicLocks::heldMask(LensModel model) const {
   std::array<bool, kIntrinsicCount> m{};
   m[kFx] = fix_focal;
   m[kFy] = fix_focal || fix_aspect;
@@ -254,7 +286,10 @@ std::array<bool, kIntrinsicCount> IntrinsicLocks::heldMask() const {
   m[kK1] = fix_k1;
   m[kK2] = fix_k2;
   m[kK3] = fix_k3;
+  m[kK4] = fix_k4;
   m[kP1] = m[kP2] = fix_tangential;
+  if (model == LensModel::kKannalaBrandt) m[kP1] = m[kP2] = true;
+  else m[kK4] = true;
   return m;
 }
 
@@ -293,10 +328,64 @@ void IntrinsicsOptions::validate() const {
     failField("initial_camera", "is needed by the fix_focal lock (the focal length to hold)");
   if (!opencv_init && !initial_camera)
     failField("initial_camera", "is needed when opencv_init is false");
-  if (initial_camera) initial_camera->validate();
+  if (initial_camera) {
+    initial_camera->validate();
+    if (initial_camera->dist.model != model)
+      failField("initial_camera", std::string("lens model is ") + previz::toString(initial_camera->dist.model) +
+                                      " but the solve is for " + previz::toString(model));
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
+
+namespace {
+
+// The starting point of a Kannala–Brandt solve: OpenCV's fisheye calibration (its own
+// initialisation, a few iterations), with the locks it has.
+void initFisheye(const std::vector<ViewPoints>& used_points, const cv::Size& size, const Camera& lock_values,
+                 const IntrinsicsOptions& options, double& initial_rms_px, double* intr,
+                 std::vector<std::array<double, 6>>& poses) {
+  std::vector<std::vector<cv::Point3d>> object(used_points.size());
+  std::vector<std::vector<cv::Point2d>> image(used_points.size());
+  for (size_t k = 0; k < used_points.size(); ++k) {
+    for (size_t i = 0; i < used_points[k].ids.size(); ++i) {
+      const Eigen::Vector3d& p = used_points[k].p_board[i];
+      object[k].emplace_back(p.x(), p.y(), p.z());
+      image[k].emplace_back(used_points[k].px[i].x(), used_points[k].px[i].y());
+    }
+  }
+  int flags = cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW;
+  if (options.initial_camera) flags |= cv::fisheye::CALIB_USE_INTRINSIC_GUESS;
+  if (options.locks.fix_focal) flags |= cv::fisheye::CALIB_FIX_FOCAL_LENGTH;
+  if (options.locks.fix_principal_point) flags |= cv::fisheye::CALIB_FIX_PRINCIPAL_POINT;
+  if (options.locks.fix_k1) flags |= cv::fisheye::CALIB_FIX_K1;
+  if (options.locks.fix_k2) flags |= cv::fisheye::CALIB_FIX_K2;
+  if (options.locks.fix_k3) flags |= cv::fisheye::CALIB_FIX_K3;
+  if (options.locks.fix_k4) flags |= cv::fisheye::CALIB_FIX_K4;
+  cv::Matx33d K(lock_values.fx, 0, lock_values.cx, 0, lock_values.fy, lock_values.cy, 0, 0, 1);
+  cv::Vec4d D(lock_values.dist.k1, lock_values.dist.k2, lock_values.dist.k3, lock_values.dist.k4);
+  std::vector<cv::Vec3d> rvecs, tvecs;
+  try {
+    initial_rms_px = cv::fisheye::calibrate(object, image, size, K, D, rvecs, tvecs, flags,
+                                            cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 30, 1e-10));
+  } catch (const cv::Exception& e) {
+    throw Error(std::string("calibrate: OpenCV's fisheye::calibrate (initialisation of the kannala-brandt solve) "
+                            "failed: ") +
+                e.what());
+  }
+  Camera init = lock_values;
+  init.fx = K(0, 0);
+  init.fy = K(1, 1);
+  init.cx = K(0, 2);
+  init.cy = K(1, 2);
+  init.skew = 0;
+  init.dist = Distortion::kannalaBrandt(D[0], D[1], D[2], D[3]);
+  detail::cameraToVector(init, intr);
+  for (size_t k = 0; k < used_points.size(); ++k)
+    poses[k] = {rvecs[k][0], rvecs[k][1], rvecs[k][2], tvecs[k][0], tvecs[k][1], tvecs[k][2]};
+}
+
+}  // namespace
 
 std::optional<Pose> estimateBoardPose(const Camera& camera, const ViewObservations& view,
                                       const BoardSpec& board, bool refine) {
@@ -304,7 +393,7 @@ std::optional<Pose> estimateBoardPose(const Camera& camera, const ViewObservatio
   if (!usableViewPoints(view, boardPointMap(board), 4, vp).empty()) return std::nullopt;
   double intr[kIntrinsicCount];
   detail::cameraToVector(camera, intr);
-  const auto pose = pnp(intr, vp, refine);
+  const auto pose = pnp(intr, camera.dist.model, vp, refine);
   if (!pose) return std::nullopt;
   return arrayToPose(*pose);
 }
@@ -362,7 +451,9 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   const int w = result.image_size.width, h = result.image_size.height;
 
   // Values the held parameters keep.
+  const LensModel model = options.model;
   Camera lock_values;
+  lock_values.dist.model = model;
   if (options.initial_camera) {
     lock_values = *options.initial_camera;
   } else {
@@ -372,14 +463,16 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
     lock_values.cx = 0.5 * (w - 1);
     lock_values.cy = 0.5 * (h - 1);
   }
-  const std::array<bool, kIntrinsicCount> held = options.locks.heldMask();
+  const std::array<bool, kIntrinsicCount> held = options.locks.heldMask(model);
   const double aspect_lock = lock_values.fy / lock_values.fx;
   const double tie_aspect = options.locks.fix_aspect ? aspect_lock : 0.0;
 
   // ---- initialisation
   double intr[kIntrinsicCount];
   std::vector<std::array<double, 6>> poses(used.size());
-  if (options.opencv_init) {
+  if (options.opencv_init && model == LensModel::kKannalaBrandt) {
+    initFisheye(used_points, result.image_size, lock_values, options, result.initial_rms_px, intr, poses);
+  } else if (options.opencv_init) {
     std::vector<std::vector<cv::Point3f>> object(used.size());
     std::vector<std::vector<cv::Point2f>> image(used.size());
     for (size_t k = 0; k < used.size(); ++k) {
@@ -449,7 +542,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   }
   if (!options.opencv_init) {
     for (size_t k = 0; k < used.size(); ++k) {
-      const auto pose = pnp(intr, used_points[k], false);
+      const auto pose = pnp(intr, model, used_points[k], false);
       if (!pose) {
         ErrorContext context;
         context.file = result.views[used[k]].source;
@@ -458,7 +551,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
       poses[k] = *pose;
     }
   }
-  detail::vectorToCamera(intr, result.initial_camera);
+  detail::vectorToCamera(intr, model, result.initial_camera);
   result.initial_camera.name = options.camera_name;
   result.initial_camera.width = w;
   result.initial_camera.height = h;
@@ -477,7 +570,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   }
   if (!options.opencv_init) {
     double ssr = 0;
-    for (const SolvePoint& p : points) ssr += residualAt(intr, poses[p.view], p, tie_aspect).squaredNorm();
+    for (const SolvePoint& p : points) ssr += residualAt(intr, poses[p.view], p, tie_aspect, model).squaredNorm();
     result.initial_rms_px = std::sqrt(ssr / points.size());
   }
 
@@ -491,7 +584,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   for (SolvePoint& p : points) {
     p.block = problem.AddResidualBlock(
         new ceres::AutoDiffCostFunction<ReprojectionCost, 2, kIntrinsicCount, 6>(
-            new ReprojectionCost(p.p_board, p.px, tie_aspect)),
+            new ReprojectionCost(p.p_board, p.px, tie_aspect, model)),
         loss.get(), intr, poses[p.view].data());
   }
   std::vector<int> constant;
@@ -524,13 +617,13 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
     if (!options.reject_outliers || round >= options.max_rejection_rounds) break;
     std::vector<double> norms;
     for (const SolvePoint& p : points)
-      if (p.active) norms.push_back(residualAt(intr, poses[p.view], p, tie_aspect).norm());
+      if (p.active) norms.push_back(residualAt(intr, poses[p.view], p, tie_aspect, model).norm());
     const double threshold = options.outlier_sigma * median(norms) / 1.1774;
     int rejected = 0;
     std::vector<int> remaining(used.size(), 0);
     for (SolvePoint& p : points) {
       if (!p.active) continue;
-      if (residualAt(intr, poses[p.view], p, tie_aspect).norm() > threshold) {
+      if (residualAt(intr, poses[p.view], p, tie_aspect, model).norm() > threshold) {
         p.active = false;
         problem.RemoveResidualBlock(p.block);
         p.block = nullptr;
@@ -563,7 +656,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   }
 
   // ---- results
-  detail::vectorToCamera(intr, result.camera);
+  detail::vectorToCamera(intr, model, result.camera);
   if (options.locks.fix_aspect) result.camera.fy = tie_aspect * result.camera.fx;
   result.camera.name = options.camera_name;
   result.camera.width = w;
@@ -576,7 +669,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
     const int v = used[p.view];
     ViewResult& vr = result.views[v];
     if (!view_active[p.view]) continue;
-    const Eigen::Vector2d r = residualAt(intr, poses[p.view], p, tie_aspect);
+    const Eigen::Vector2d r = residualAt(intr, poses[p.view], p, tie_aspect, model);
     PointResidual pr;
     pr.view = v;
     pr.id = p.id;
@@ -708,12 +801,16 @@ std::string IntrinsicsResult::fullReport() const {
   s << "  covariance           "
     << (covariance_ok ? "ok (sigmas scaled by the noise estimate)" : "unavailable: " + covariance_message)
     << "\n\n";
-  s << "  parameter        start         estimate        sigma\n";
-  const std::array<bool, kIntrinsicCount> held = locks.heldMask();
+  const LensModel model = camera.dist.model;
+  const std::array<bool, kIntrinsicCount> held = locks.heldMask(model);
   double start_v[kIntrinsicCount], est_v[kIntrinsicCount];
   detail::cameraToVector(initial_camera, start_v);
   detail::cameraToVector(camera, est_v);
+  s << "  lens model           " << previz::toString(model) << "\n";
+  s << "  parameter        start         estimate        sigma\n";
   for (int i = 0; i < kIntrinsicCount; ++i) {
+    // Terms the lens model does not have are not listed.
+    if (model == LensModel::kKannalaBrandt ? (i == kP1 || i == kP2) : i == kK4) continue;
     const bool is_distortion = i >= kK1;
     std::snprintf(line, sizeof(line),
                   is_distortion ? "  %-6s %15.7f %15.7f %12.7f%s\n" : "  %-6s %15.4f %15.4f %12.4f%s\n",

@@ -1,7 +1,8 @@
 #pragma once
 // Intrinsic calibration of one camera from views of a planar board: OpenCV's calibrateCamera
-// gives the starting point, then a Ceres bundle adjustment over the intrinsics (fx fy cx cy
-// [skew] k1 k2 p1 p2 k3) and every board pose, with a robust loss, outlier rejection, parameter
+// gives the starting point (cv::fisheye::calibrate for a Kannala–Brandt lens), then a Ceres bundle
+// adjustment over the intrinsics (fx fy cx cy [skew] and the lens model's terms: k1 k2 p1 p2 k3, or
+// k1 k2 k3 k4) and every board pose, with a robust loss, outlier rejection, parameter
 // locks and a covariance that says how sure each parameter is. The result explains itself
 // (IntrinsicsResult::fullReport()).
 // Pixels: (0,0) = centre of the top-left pixel; board frame and poses: docs/conventions.md.
@@ -21,8 +22,10 @@
 namespace previz::calib {
 
 // Order of the intrinsic vector used by covariances and sigmas.
-constexpr int kIntrinsicCount = 10;
-extern const std::array<const char*, kIntrinsicCount> kIntrinsicNames;  // fx fy cx cy skew k1 k2 p1 p2 k3
+// The lens model decides which distortion terms are free: Brown–Conrady k1 k2 p1 p2 k3 (k4 held at
+// 0), Kannala–Brandt k1 k2 k3 k4 (p1 p2 held at 0).
+constexpr int kIntrinsicCount = 11;
+extern const std::array<const char*, kIntrinsicCount> kIntrinsicNames;  // fx fy cx cy skew k1 k2 p1 p2 k3 k4
 
 // Parameters held at their initial value (from IntrinsicsOptions::initial_camera, else: aspect
 // 1, principal point at the image centre ((w-1)/2, (h-1)/2), distortion 0).
@@ -31,16 +34,16 @@ struct IntrinsicLocks {
   bool fix_aspect = false;           // fy / fx held; fx still free
   bool fix_principal_point = false;  // cx, cy
   bool fix_skew = true;              // skew is estimated only when this is cleared
-  bool fix_k1 = false, fix_k2 = false, fix_k3 = false;
+  bool fix_k1 = false, fix_k2 = false, fix_k3 = false, fix_k4 = false;
   bool fix_tangential = false;       // p1, p2
 
   // "fix_k3,fix_aspect": comma-separated names of the flags above, plus fix_distortion (all of
-  // k1 k2 k3 p1 p2), fix_radial (k1 k2 k3) and free_skew. Throws Error naming the bad name.
+  // k1 k2 k3 k4 p1 p2), fix_radial (k1 k2 k3 k4) and free_skew. Throws Error naming the bad name.
   static IntrinsicLocks parse(const std::string& list);
   std::string toString() const;  // the set flags, comma-separated ("" when none)
   // Per intrinsic (kIntrinsicNames order): true when held. fy counts as held under fix_aspect
-  // (it follows fx).
-  std::array<bool, kIntrinsicCount> heldMask() const;
+  // (it follows fx); the terms the lens model does not have are held (at 0).
+  std::array<bool, kIntrinsicCount> heldMask(LensModel model) const;
 };
 
 enum class RobustLoss { kNone, kHuber, kCauchy };
@@ -49,6 +52,8 @@ RobustLoss robustLossFromString(const std::string& name);  // throws Error namin
 
 struct IntrinsicsOptions {
   IntrinsicLocks locks;
+  // The lens model solved for. initial_camera, when given, must have the same one.
+  LensModel model = LensModel::kBrownConrady;
   RobustLoss loss = RobustLoss::kHuber;
   double loss_scale_px = 1.0;       // residual norm where the robust loss departs from squares
   bool reject_outliers = true;

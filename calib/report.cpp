@@ -264,7 +264,7 @@ nlohmann::json reportToJson(const CalibReport& report) {
   j["initial_camera"] = cameraToJson(r.initial_camera);
   j["board"] = boardToJson(report.board);
   nlohmann::json sigma, held;
-  const auto mask = r.locks.heldMask();
+  const auto mask = r.locks.heldMask(r.camera.dist.model);
   for (int k = 0; k < kIntrinsicCount; ++k) {
     sigma[kIntrinsicNames[k]] = r.sigma[k];
     held[kIntrinsicNames[k]] = mask[k];

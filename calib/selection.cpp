@@ -81,12 +81,13 @@ Eigen::MatrixXd marginalViewInformation(const Camera& camera, const Pose& T_cam_
   Eigen::Vector3d r, t;
   poseToRvecTvec(T_cam_board, r, t);
   const double pose[6] = {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
-  Eigen::Matrix<double, 16, 16> JtJ = Eigen::Matrix<double, 16, 16>::Zero();
-  Eigen::Matrix<double, 2, 16> J;
+  constexpr int kN = kIntrinsicCount + 6;
+  Eigen::Matrix<double, kN, kN> JtJ = Eigen::Matrix<double, kN, kN>::Zero();
+  Eigen::Matrix<double, 2, kN> J;
   for (const Observation& o : view.points) {
     auto it = points.find(o.id);
     if (it == points.end()) continue;
-    detail::projectBoardPointJacobian(intr, pose, it->second, aspect_tie, J);
+    detail::projectBoardPointJacobian(intr, pose, it->second, aspect_tie, camera.dist.model, J);
     JtJ.noalias() += J.transpose() * J;
   }
   const int n = static_cast<int>(free.size());
@@ -114,13 +115,14 @@ ViewSelector::ViewSelector(const BoardSpec& board, cv::Size image_size,
       failField("guess", "size differs from the image size");
   } else {
     guess_.name = "guess";
+    guess_.dist.model = options_.model;
     guess_.width = image_size.width;
     guess_.height = image_size.height;
     guess_.fx = guess_.fy = 0.8 * std::max(image_size.width, image_size.height);
     guess_.cx = 0.5 * (image_size.width - 1);
     guess_.cy = 0.5 * (image_size.height - 1);
   }
-  const auto held = options_.locks.heldMask();
+  const auto held = options_.locks.heldMask(guess_.dist.model);
   for (int i = 0; i < kIntrinsicCount; ++i)
     if (!held[i]) free_.push_back(i);
   updateLinearisation();
@@ -161,7 +163,7 @@ void ViewSelector::updateLinearisation() {
                                 (gy + 0.5) / 12.0 * (image_size.height - 1));
         const auto ray = guess_.unproject(q);
         if (!ray) continue;
-        detail::projectCameraPointJacobian(intr, *ray, aspect, J);
+        detail::projectCameraPointJacobian(intr, *ray, aspect, guess_.dist.model, J);
         Eigen::MatrixXd Jf(2, n);
         for (int k = 0; k < n; ++k) Jf.col(k) = J.col(free_[k]);
         grid_ += Jf.transpose() * Jf;

@@ -50,6 +50,7 @@ struct SelectionOptions {
   // Linearisation point. Unset: fx = fy = 0.8 * max(width, height) (about 73 degrees across the
   // long side), principal point at the centre, no distortion.
   std::optional<Camera> guess;
+  LensModel model = LensModel::kBrownConrady;  // the lens model of the nominal guess (no guess given)
   IntrinsicLocks locks;             // held intrinsics are left out of the information
   double noise_px = 0.1;            // assumed detection noise, scales predicted sigmas only
   double min_improvement = 1e-6;    // a swap must raise the objective by this much

@@ -40,7 +40,7 @@ double worstSigma(const Eigen::Matrix2d& C) {
 }
 
 // Pixel of a camera-frame point with its Jacobians wrt intrinsics (2 x 10) and the point (2 x 3).
-void projectWithJacobians(const double* intr, const Eigen::Vector3d& p,
+void projectWithJacobians(const double* intr, LensModel model, const Eigen::Vector3d& p,
                           Eigen::Matrix<double, 2, kIntrinsicCount>& J_intr,
                           Eigen::Matrix<double, 2, 3>& J_point) {
   using Jet = ceres::Jet<double, kIntrinsicCount + 3>;
@@ -48,7 +48,7 @@ void projectWithJacobians(const double* intr, const Eigen::Vector3d& p,
   for (int i = 0; i < kIntrinsicCount; ++i) ji[i] = Jet(intr[i], i);
   for (int i = 0; i < 3; ++i) jp[i] = Jet(p(i), kIntrinsicCount + i);
   Jet uv[2];
-  detail::projectCameraPoint(ji, jp, 0.0, uv);
+  detail::projectCameraPoint(ji, jp, 0.0, model, uv);
   for (int r = 0; r < 2; ++r) {
     J_intr.row(r) = uv[r].v.head<kIntrinsicCount>().transpose();
     J_point.row(r) = uv[r].v.tail<3>().transpose();
@@ -65,8 +65,8 @@ struct DiffField {
 DiffField projectionDiff(const double* intr_a, const double* intr_b, const Camera& size_ref,
                          const std::vector<Eigen::Vector2d>& pixels, bool fit_rotation) {
   Camera a = size_ref, b = size_ref;
-  detail::vectorToCamera(intr_a, a);
-  detail::vectorToCamera(intr_b, b);
+  detail::vectorToCamera(intr_a, size_ref.dist.model, a);
+  detail::vectorToCamera(intr_b, size_ref.dist.model, b);
   DiffField out;
   out.d.assign(pixels.size(), Eigen::Vector2d::Zero());
   out.valid.assign(pixels.size(), false);
@@ -91,7 +91,7 @@ DiffField projectionDiff(const double* intr_a, const double* intr_b, const Camer
       const Jet r[3] = {Jet(rays[k].x()), Jet(rays[k].y()), Jet(rays[k].z())};
       Jet p[3], uv[2];
       ceres::AngleAxisRotatePoint(jw, r, p);
-      detail::projectCameraPoint(ji, p, 0.0, uv);
+      detail::projectCameraPoint(ji, p, 0.0, b.dist.model, uv);
       d[k] = Eigen::Vector2d(uv[0].a - pixels[k].x(), uv[1].a - pixels[k].y());
       if (JtJ) {
         Eigen::Matrix<double, 2, 3> J;
@@ -179,7 +179,7 @@ UncertaintyMap projectionUncertainty(const IntrinsicsResult& result,
       Eigen::Matrix<double, 2, 3> J_point;
       const Eigen::Vector3d p_cam = mean_frames ? Eigen::Vector3d(*ray / ray->z() * options.distance_m)
                                                 : Eigen::Vector3d(*ray);
-      projectWithJacobians(intr, p_cam, J_intr, J_point);
+      projectWithJacobians(intr, camera.dist.model, p_cam, J_intr, J_point);
       Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2, cov.rows());
       J.leftCols<kIntrinsicCount>() = J_intr;
       if (mean_frames) {

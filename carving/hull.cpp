@@ -177,6 +177,8 @@ CameraModel makeCameraModel(const RigCamera& rig_camera) {
   m.p1 = c.dist.p1;
   m.p2 = c.dist.p2;
   m.k3 = c.dist.k3;
+  m.k4 = c.dist.k4;
+  m.kannala_brandt = c.dist.model == LensModel::kKannalaBrandt;
   m.distorted = !c.dist.isZero();
   // 2 % beyond the border: the valid disc must contain every point that lands in the image.
   const double fold = 0.98 * c.maxInvertibleRadius();  // +inf when the lens never folds

@@ -115,7 +115,10 @@ struct DistortEval {
 
 inline DistortEval distortXY(const Distortion& d, double x, double y) {
   DistortEval e;
-  lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, e.xd, e.yd);
+  if (d.model == LensModel::kKannalaBrandt)
+    lens::kannalaBrandtDistort(d.k1, d.k2, d.k3, d.k4, x, y, e.xd, e.yd);
+  else
+    lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, e.xd, e.yd);
   return e;
 }
 
@@ -128,8 +131,36 @@ struct Jacobian {
 inline Jacobian distortJacobianXY(const Distortion& d, double x, double y) {
   Jacobian j;
   double xd, yd;
-  lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, xd, yd, j.xx, j.xy, j.yy);
+  if (d.model == LensModel::kKannalaBrandt)
+    lens::kannalaBrandtDistortWithJacobian(d.k1, d.k2, d.k3, d.k4, x, y, xd, yd, j.xx, j.xy, j.yy);
+  else
+    lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, xd, yd, j.xx, j.xy, j.yy);
   return j;
+}
+
+// Kannala–Brandt's largest angle (lens::kannalaBrandtMaxTheta), remembered for the last lens a
+// thread asked about: project() checks the domain of every point and the search costs about two
+// thousand polynomial evaluations.
+double kbMaxTheta(const Distortion& d) {
+  thread_local double key[4] = {std::numeric_limits<double>::quiet_NaN(), 0, 0, 0};
+  thread_local double value = 0;
+  if (!(key[0] == d.k1 && key[1] == d.k2 && key[2] == d.k3 && key[3] == d.k4)) {
+    value = lens::kannalaBrandtMaxTheta(d.k1, d.k2, d.k3, d.k4);
+    key[0] = d.k1;
+    key[1] = d.k2;
+    key[2] = d.k3;
+    key[3] = d.k4;
+  }
+  return value;
+}
+
+// The squared ideal radius of the Kannala–Brandt domain: tan^2 of its largest angle (+inf at 90
+// degrees).
+double kbRadiusSquared(double max_theta) {
+  constexpr double kHalfPi = 1.5707963267948966;
+  if (!(max_theta < kHalfPi)) return kInf;
+  const double r = std::tan(max_theta);
+  return r * r;
 }
 
 inline bool inDomainXY(const Distortion& d, bool tangential, double s_max, double x, double y) {
@@ -154,6 +185,31 @@ std::string fmt(double v) {
 }
 
 }  // namespace
+
+const char* toString(LensModel model) {
+  switch (model) {
+    case LensModel::kBrownConrady: return "brown-conrady";
+    case LensModel::kKannalaBrandt: return "kannala-brandt";
+  }
+  return "unknown";
+}
+
+LensModel lensModelFromString(const std::string& name) {
+  for (const char* n : {"brown-conrady", "brown", "brown-conrady-opencv", "radtan", "plumb_bob", "pinhole-radtan"})
+    if (name == n) return LensModel::kBrownConrady;
+  for (const char* n : {"kannala-brandt", "fisheye", "equidistant", "kb4", "pinhole-equi"})
+    if (name == n) return LensModel::kKannalaBrandt;
+  throw Error("unknown lens model '" + name +
+                  "' (brown-conrady: k1 k2 p1 p2 k3, also brown, radtan, plumb_bob; kannala-brandt: k1..k4 on "
+                  "theta, also fisheye, equidistant)",
+              fieldContext("model"));
+}
+
+void requireBrownConrady(const std::string& camera_name, const Distortion& dist, const std::string& what) {
+  if (dist.isBrown()) return;
+  throw Error(what + " handles Brown-Conrady lenses only; this camera's lens model is " + toString(dist.model),
+              cameraContext(camera_name, "distortion.model"));
+}
 
 const char* toString(InverseStatus status) {
   switch (status) {
@@ -189,7 +245,15 @@ void InverseOptions::validate() const {
 // InverseDistortion
 
 InverseDistortion::InverseDistortion(const Distortion& dist)
-    : dist_(dist), has_tangential_(dist.p1 != 0.0 || dist.p2 != 0.0) {
+    : dist_(dist), has_tangential_(dist.isBrown() && (dist.p1 != 0.0 || dist.p2 != 0.0)) {
+  if (!dist_.isBrown()) {
+    // Kannala–Brandt: radial only, |xd| = theta_d, increasing up to kb_max_theta_.
+    kb_max_theta_ = kbMaxTheta(dist_);
+    s_max_ = kbRadiusSquared(kb_max_theta_);
+    r_max_ = std::sqrt(s_max_);
+    rd_max_ = lens::kannalaBrandtTheta(dist_.k1, dist_.k2, dist_.k3, dist_.k4, kb_max_theta_);
+    return;
+  }
   s_max_ = turningRadiusSquared(dist_);
   r_max_ = std::sqrt(s_max_);
   if (std::isfinite(r_max_)) {
@@ -226,6 +290,25 @@ InverseResult InverseDistortion::solve(const Eigen::Vector2d& xd,
     // Past the image of the turning circle: no ideal point in the domain maps here.
     result.point = xd;
     result.status = InverseStatus::kNotInvertible;
+    return result;
+  }
+  if (!dist_.isBrown()) {
+    // One radial equation in theta, solved by safeguarded Newton whatever the method asked
+    // (the fixed-point iteration is the thesis' for Brown's model).
+    const lens::KannalaBrandtInverse kb = lens::kannalaBrandtUndistort(
+        dist_.k1, dist_.k2, dist_.k3, dist_.k4, xd.x(), xd.y(), kb_max_theta_, options.max_iterations,
+        std::min(options.tolerance, 1e-14));
+    result.point = Eigen::Vector2d(kb.x, kb.y);
+    result.iterations = kb.iterations;
+    result.status = kb.status;
+    if (kb.status == InverseStatus::kNotInvertible) {
+      result.point = xd;
+      return result;
+    }
+    const DistortEval e = distortXY(dist_, kb.x, kb.y);
+    result.residual = std::hypot(e.xd - xd.x(), e.yd - xd.y());
+    if (result.status == InverseStatus::kNotConverged && result.residual <= options.tolerance)
+      result.status = InverseStatus::kConverged;
     return result;
   }
   return options.method == InverseMethod::kNewton ? newton(xd, options)
@@ -385,9 +468,17 @@ void Camera::validate() const {
   if (!std::isfinite(skew)) bad("skew", "must be finite (got " + fmt(skew) + ")");
   const std::pair<const char*, double> terms[] = {
       {"distortion.k1", dist.k1}, {"distortion.k2", dist.k2}, {"distortion.p1", dist.p1},
-      {"distortion.p2", dist.p2}, {"distortion.k3", dist.k3}};
+      {"distortion.p2", dist.p2}, {"distortion.k3", dist.k3}, {"distortion.k4", dist.k4}};
   for (const auto& [field, v] : terms)
     if (!std::isfinite(v)) bad(field, "must be finite (got " + fmt(v) + ")");
+  if (dist.model == LensModel::kBrownConrady && dist.k4 != 0.0)
+    bad("distortion.k4", "brown-conrady has k1 k2 p1 p2 k3; k4 is kannala-brandt's (got " + fmt(dist.k4) + ")");
+  if (dist.model == LensModel::kKannalaBrandt) {
+    if (dist.p1 != 0.0) bad("distortion.p1", "kannala-brandt has k1 k2 k3 k4 only (got p1 " + fmt(dist.p1) + ")");
+    if (dist.p2 != 0.0) bad("distortion.p2", "kannala-brandt has k1 k2 k3 k4 only (got p2 " + fmt(dist.p2) + ")");
+  } else if (dist.model != LensModel::kBrownConrady) {
+    bad("distortion.model", "unknown lens model");
+  }
 }
 
 Eigen::Matrix3d Camera::K() const {
@@ -419,9 +510,13 @@ InverseResult Camera::undistort(const Eigen::Vector2d& xd, const InverseOptions&
   return InverseDistortion(dist).solve(xd, options);
 }
 
-double Camera::maxInvertibleRadius() const { return std::sqrt(turningRadiusSquared(dist)); }
+double Camera::maxInvertibleRadius() const {
+  if (!dist.isBrown()) return std::sqrt(kbRadiusSquared(kbMaxTheta(dist)));
+  return std::sqrt(turningRadiusSquared(dist));
+}
 
 bool Camera::inInvertibleDomain(const Eigen::Vector2d& x) const {
+  if (!dist.isBrown()) return x.squaredNorm() < kbRadiusSquared(kbMaxTheta(dist));
   if (!radialIncreasingUpTo(dist, x.squaredNorm())) return false;
   if (dist.p1 == 0.0 && dist.p2 == 0.0) return true;
   return distortJacobianXY(dist, x.x(), x.y()).det() > 0.0;

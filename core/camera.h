@@ -1,6 +1,7 @@
 #pragma once
-// Pinhole camera with Brown–Conrady distortion in OpenCV's convention (core/lens_model.h, where
-// the model is defined): the model distorts ideal normalized coordinates (x, y) = (X/Z, Y/Z) to
+// Pinhole camera with a lens model (core/lens_model.h, where each model is defined once):
+// Brown–Conrady in OpenCV's convention, or Kannala–Brandt equidistant (OpenCV's fisheye module,
+// Kalibr's "equidistant"). The model distorts ideal normalized coordinates (x, y) = (X/Z, Y/Z) to
 // (xd, yd), then
 //   u = fx xd + skew yd + cx,  v = fy yd + cy
 // Pixel (0,0) is the centre of the top-left pixel; camera frame x right, y down, z forward.
@@ -14,10 +15,38 @@
 
 namespace previz {
 
-struct Distortion {
-  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
-  bool isZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+enum class LensModel {
+  kBrownConrady,   // k1 k2 p1 p2 k3 (OpenCV's order); k4 must be 0
+  kKannalaBrandt,  // k1 k2 k3 k4 on theta (OpenCV fisheye's D); p1, p2 must be 0
 };
+// "brown-conrady" / "kannala-brandt" (the names rig.json, reports and --model use).
+const char* toString(LensModel model);
+// Also accepts the other tools' names: brown, radtan, plumb_bob, pinhole-radtan; fisheye,
+// equidistant, kb4. Throws Error naming the value.
+LensModel lensModelFromString(const std::string& name);
+
+// {k1, k2, p1, p2, k3} is a Brown–Conrady lens (the model comes last so that OpenCV's order
+// initialises it); Distortion::kannalaBrandt(k1, k2, k3, k4) a fisheye.
+struct Distortion {
+  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0, k4 = 0;
+  LensModel model = LensModel::kBrownConrady;
+  static Distortion kannalaBrandt(double k1, double k2, double k3, double k4) {
+    return {k1, k2, 0, 0, k3, k4, LensModel::kKannalaBrandt};
+  }
+  // The identity map (a Kannala–Brandt lens with zero coefficients is not: it is equidistant).
+  bool isZero() const {
+    return model == LensModel::kBrownConrady && k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0 && k4 == 0;
+  }
+  bool isBrown() const { return model == LensModel::kBrownConrady; }
+  bool operator==(const Distortion& o) const {
+    return model == o.model && k1 == o.k1 && k2 == o.k2 && p1 == o.p1 && p2 == o.p2 && k3 == o.k3 && k4 == o.k4;
+  }
+  bool operator!=(const Distortion& o) const { return !(*this == o); }
+};
+
+// Throws Error naming the camera when its lens model is not Brown–Conrady: for code paths that
+// do not carry the other models yet. 'what' says which (e.g. "the lens table").
+void requireBrownConrady(const std::string& camera_name, const Distortion& dist, const std::string& what);
 
 // Inverse of the distortion (distorted normalized -> ideal normalized).
 enum class InverseMethod {
@@ -64,6 +93,7 @@ class InverseDistortion {
   InverseResult fixedPoint(const Eigen::Vector2d& xd, const InverseOptions& options) const;
   Distortion dist_;
   bool has_tangential_ = false;
+  double kb_max_theta_ = 0;  // Kannala–Brandt: where theta_d stops increasing (<= pi/2)
   double s_max_;   // squared turning radius
   double r_max_;
   double rd_max_;
@@ -89,7 +119,8 @@ class Camera {
   // Distorted normalized -> ideal normalized, with a convergence report.
   InverseResult undistort(const Eigen::Vector2d& xd, const InverseOptions& options = {}) const;
 
-  // Radius (ideal normalized) at which the radial map r -> r (1 + k1 r^2 + k2 r^4 + k3 r^6)
+  // Radius (ideal normalized) at which the radial map (Brown: r -> r (1 + k1 r^2 + k2 r^4 +
+  // k3 r^6); Kannala–Brandt: tan of the angle where theta_d stops increasing, or of 90 degrees)
   // stops increasing; +inf when it never does. Points past it fold back onto the image and
   // are reported as not invertible / not projectable.
   double maxInvertibleRadius() const;

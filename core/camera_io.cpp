@@ -200,30 +200,51 @@ Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, 
     c.fy = K(1, 1);
     c.cy = K(1, 2);
 
-    // ROS camera_info names its lens model; OpenCV's own files do not.
+    // ROS camera_info names its lens model, and so does previz for a fisheye; OpenCV's own
+    // calibrateCamera files do not (Brown-Conrady).
+    bool fisheye = false;
     if (store["distortion_model"].isString()) {
       const std::string model = store["distortion_model"];
-      if (model == "equidistant" || model == "fisheye")
-        throw Error("the fisheye (Kannala-Brandt) model is not supported yet", cameraFileContext(file, name, "distortion_model"));
-      if (model != "plumb_bob" && model != "rational_polynomial")
-        throw Error("unsupported distortion model '" + model + "' (plumb_bob: k1 k2 p1 p2 k3)",
+      fisheye = model == "equidistant" || model == "fisheye" || model == "kannala-brandt";
+      if (!fisheye && model != "plumb_bob" && model != "rational_polynomial")
+        throw Error("unsupported distortion model '" + model +
+                        "' (plumb_bob: k1 k2 p1 p2 k3; equidistant / fisheye: k1 k2 k3 k4 of OpenCV's fisheye module)",
                     cameraFileContext(file, name, "distortion_model"));
     }
-    if (store[d_key].empty())
-      throw Error("missing field, expected a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])", cameraFileContext(file, name, d_key));
-    const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
-    if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", cameraFileContext(file, name, d_key));
-    const Eigen::Index n = D.size();
-    if (n < 4)
-      throw Error("expected at least 4 coefficients (k1 k2 p1 p2), got " + std::to_string(n),
-                  cameraFileContext(file, name, d_key));
-    for (Eigen::Index i = 5; i < n; ++i)
-      if (D(i) != 0.0)
-        throw Error("coefficient " + std::to_string(i) +
-                        " is non-zero: rational / thin-prism / tilt terms are not supported "
-                        "(model brown-conrady-opencv: k1 k2 p1 p2 k3)",
+    if (fisheye) {
+      if (store[d_key].empty())
+        throw Error("missing field, expected a 1x4 or 4x1 matrix (k1 k2 k3 k4)", cameraFileContext(file, name, d_key));
+      const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
+      if ((D.rows() != 1 && D.cols() != 1) || D.size() != 4)
+        throw Error("expected 4 fisheye coefficients (k1 k2 k3 k4) in a 1x4 or 4x1 matrix, got " +
+                        std::to_string(D.rows()) + "x" + std::to_string(D.cols()),
                     cameraFileContext(file, name, d_key));
-    c.dist = {D(0), D(1), D(2), D(3), n > 4 ? D(4) : 0.0};
+      c.dist.model = LensModel::kKannalaBrandt;
+      c.dist.k1 = D(0);
+      c.dist.k2 = D(1);
+      c.dist.k3 = D(2);
+      c.dist.k4 = D(3);
+    } else {
+      if (store[d_key].empty())
+        throw Error("missing field, expected a 1xN or Nx1 matrix (k1 k2 p1 p2 [k3 ...])", cameraFileContext(file, name, d_key));
+      const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
+      if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", cameraFileContext(file, name, d_key));
+      const Eigen::Index n = D.size();
+      if (n < 4)
+        throw Error("expected at least 4 coefficients (k1 k2 p1 p2), got " + std::to_string(n),
+                    cameraFileContext(file, name, d_key));
+      for (Eigen::Index i = 5; i < n; ++i)
+        if (D(i) != 0.0)
+          throw Error("coefficient " + std::to_string(i) +
+                          " is non-zero: rational / thin-prism / tilt terms are not supported "
+                          "(model brown-conrady-opencv: k1 k2 p1 p2 k3)",
+                      cameraFileContext(file, name, d_key));
+      c.dist.k1 = D(0);
+      c.dist.k2 = D(1);
+      c.dist.p1 = D(2);
+      c.dist.p2 = D(3);
+      c.dist.k3 = n > 4 ? D(4) : 0.0;
+    }
   } catch (const cv::Exception& e) {
     throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), cameraFileContext(file, name, ""));
   }
@@ -263,17 +284,22 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
     cv::FileStorage store(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | format);
     if (format != cv::FileStorage::FORMAT_JSON)
       store.writeComment("previz camera '" + camera.name +
-                         "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3); pixel (0,0) is the centre of the "
-                         "top-left pixel" +
+                         (camera.dist.isBrown()
+                              ? "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3)"
+                              : "': OpenCV fisheye, Kannala-Brandt (k1 k2 k3 k4, cv::fisheye's D)") +
+                         "; pixel (0,0) is the centre of the top-left pixel" +
                          (T_world_cam ? "; rvec/tvec map world to camera (x_cam = R x_world + t), metres, "
                                         "world z up"
                                       : ""));
     store << "image_width" << camera.width;
     store << "image_height" << camera.height;
     cv::Mat K = (cv::Mat_<double>(3, 3) << camera.fx, camera.skew, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1);
-    // 5x1, as cv::calibrateCamera returns it.
-    cv::Mat D = (cv::Mat_<double>(5, 1) << camera.dist.k1, camera.dist.k2, camera.dist.p1, camera.dist.p2,
-                 camera.dist.k3);
+    // 5x1, as cv::calibrateCamera returns it; a fisheye's 4x1, as cv::fisheye::calibrate does,
+    // named by distortion_model (ROS camera_info's key and value).
+    const Distortion& d = camera.dist;
+    const cv::Mat D = d.isBrown() ? cv::Mat((cv::Mat_<double>(5, 1) << d.k1, d.k2, d.p1, d.p2, d.k3))
+                                  : cv::Mat((cv::Mat_<double>(4, 1) << d.k1, d.k2, d.k3, d.k4));
+    if (!camera.dist.isBrown()) store << "distortion_model" << "equidistant";
     store << "camera_matrix" << K;
     store << "distortion_coefficients" << D;
     if (T_world_cam) {

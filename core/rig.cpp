@@ -68,21 +68,24 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
   c.skew = j.contains("skew") ? readNumber(j, "skew", prefix, file, cam) : 0.0;
   if (j.contains("model")) {
     const std::string model = readString(j, "model", prefix, file, cam);
-    if (model != kModel)
-      throw Error("unsupported camera model '" + model + "', expected '" + kModel + "'",
-                  cameraFileContext(file, cam, prefix + "model"));
+    try {
+      c.dist.model = lensModelFromString(model);
+    } catch (const Error& e) {
+      throw Error(e.message(), cameraFileContext(file, cam, prefix + "model"));
+    }
   }
+  const bool kb = c.dist.model == LensModel::kKannalaBrandt;
   if (j.contains("distortion")) {
     const auto& d = j.at("distortion");
     const std::string dp = prefix + "distortion.";
+    const char* terms = kb ? "k1 k2 k3 k4" : "k1 k2 p1 p2 k3";
     if (!d.is_object())
-      throw Error(std::string("expected an object {\"k1\",\"k2\",\"p1\",\"p2\",\"k3\"}, got ") + typeName(d),
+      throw Error(std::string("expected an object of the terms ") + terms + ", got " + typeName(d),
                   cameraFileContext(file, cam, prefix + "distortion"));
     for (auto it = d.begin(); it != d.end(); ++it) {
-      static const std::set<std::string> known = {"k1", "k2", "p1", "p2", "k3"};
-      if (!known.count(it.key()))
-        throw Error("unsupported distortion term (model " + std::string(kModel) +
-                        " has k1 k2 p1 p2 k3)",
+      static const std::set<std::string> brown = {"k1", "k2", "p1", "p2", "k3"}, fisheye = {"k1", "k2", "k3", "k4"};
+      if (!(kb ? fisheye : brown).count(it.key()))
+        throw Error(std::string("unsupported distortion term (model ") + toString(c.dist.model) + " has " + terms + ")",
                     cameraFileContext(file, cam, dp + it.key()));
     }
     // Absent terms are zero (a lens calibrated with fewer terms).
@@ -92,6 +95,7 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
     c.dist.p1 = term("p1");
     c.dist.p2 = term("p2");
     c.dist.k3 = term("k3");
+    c.dist.k4 = term("k4");
   }
   try {
     c.validate();
@@ -158,8 +162,13 @@ nlohmann::json cameraToJson(const Camera& c) {
   j["cx"] = c.cx;
   j["cy"] = c.cy;
   j["skew"] = c.skew;
-  j["distortion"] = {{"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3}};
-  j["model"] = kModel;
+  if (c.dist.isBrown()) {
+    j["distortion"] = {{"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3}};
+    j["model"] = kModel;
+  } else {
+    j["distortion"] = {{"k1", c.dist.k1}, {"k2", c.dist.k2}, {"k3", c.dist.k3}, {"k4", c.dist.k4}};
+    j["model"] = toString(c.dist.model);
+  }
   return j;
 }
 

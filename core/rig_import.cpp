@@ -346,15 +346,14 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
   const std::string id = tok[0];
   const std::string model = tok[1];
   const std::string cam = "camera id " + id;
-  const std::map<std::string, size_t> counts = {{"SIMPLE_PINHOLE", 3}, {"PINHOLE", 4}, {"SIMPLE_RADIAL", 4},
-                                                {"RADIAL", 5},         {"OPENCV", 8},  {"FULL_OPENCV", 12}};
+  const std::map<std::string, size_t> counts = {{"SIMPLE_PINHOLE", 3}, {"PINHOLE", 4},     {"SIMPLE_RADIAL", 4},
+                                                {"RADIAL", 5},         {"OPENCV", 8},      {"FULL_OPENCV", 12},
+                                                {"OPENCV_FISHEYE", 8}};
   const auto it = counts.find(model);
   if (it == counts.end()) {
-    const bool fisheye = model.find("FISHEYE") != std::string::npos;
-    throw Error(lineTag(line) + (fisheye ? "the fisheye (Kannala-Brandt) model is not supported yet"
-                                         : "unsupported camera model '" + model +
-                                               "' (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
-                                               "FULL_OPENCV with k4 = k5 = k6 = 0)"),
+    throw Error(lineTag(line) + "unsupported camera model '" + model +
+                    "' (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV with k4 = k5 = k6 = 0, "
+                    "OPENCV_FISHEYE)",
                 cameraFileContext(file, cam, "MODEL"));
   }
   if (tok.size() != 4 + it->second)
@@ -377,6 +376,7 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
   if (model == "SIMPLE_RADIAL") c.dist.k1 = p[3];
   if (model == "RADIAL") c.dist = {p[3], p[4], 0, 0, 0};
   if (model == "OPENCV" || model == "FULL_OPENCV") c.dist = {p[4], p[5], p[6], p[7], 0};
+  if (model == "OPENCV_FISHEYE") c.dist = Distortion::kannalaBrandt(p[4], p[5], p[6], p[7]);
   if (model == "FULL_OPENCV") {
     c.dist.k3 = p[8];
     if (p[9] != 0 || p[10] != 0 || p[11] != 0)
@@ -641,10 +641,8 @@ RigImport importKalibr(const fs::path& camchain, const ImportOptions& opt) {
     if (model != "pinhole")
       throw kc.error("camera_model", "camera model '" + model + "' is not supported (pinhole only)");
     const std::string dist = kc.text("distortion_model");
-    if (dist == "equidistant")
-      throw kc.error("distortion_model", "the fisheye (Kannala-Brandt) model is not supported yet");
-    if (dist != "radtan" && dist != "none")
-      throw kc.error("distortion_model", "distortion model '" + dist + "' is not supported (radtan or none)");
+    if (dist != "radtan" && dist != "none" && dist != "equidistant")
+      throw kc.error("distortion_model", "distortion model '" + dist + "' is not supported (radtan, equidistant or none)");
 
     RigCamera rc;
     Camera& c = rc.camera;
@@ -657,6 +655,9 @@ RigImport importKalibr(const fs::path& camchain, const ImportOptions& opt) {
     if (dist == "radtan") {
       const std::vector<double> d = kc.numbers("distortion_coeffs", 4);  // k1 k2 r1 r2
       c.dist = {d[0], d[1], d[2], d[3], 0.0};
+    } else if (dist == "equidistant") {
+      const std::vector<double> d = kc.numbers("distortion_coeffs", 4);  // k1 k2 k3 k4
+      c.dist = Distortion::kannalaBrandt(d[0], d[1], d[2], d[3]);
     }
     const std::vector<double> res = kc.numbers("resolution", 2);
     if (!toInt(exact(res[0])) || !toInt(exact(res[1]))) throw kc.error("resolution", "expected integers [width, height]");
@@ -685,7 +686,8 @@ RigImport importKalibr(const fs::path& camchain, const ImportOptions& opt) {
     out.rig.cameras.push_back(std::move(rc));
   }
   out.report.assumptions.push_back("pixels: Kalibr's pu, pv taken in OpenCV's convention (pixel (0,0) at the centre of "
-                                   "the top-left pixel); radtan [k1 k2 r1 r2] = OpenCV's k1 k2 p1 p2");
+                                   "the top-left pixel); radtan [k1 k2 r1 r2] = OpenCV's k1 k2 p1 p2; equidistant "
+                                   "[k1 k2 k3 k4] = OpenCV fisheye's D (Kannala-Brandt)");
   finishImport(out, opt,
                chain[0]->find("T_world_cam") ? "the Kalibr file's T_world_cam world"
                                                           : "camera '" + out.rig.cameras[0].camera.name + "' (Kalibr cam0)");
@@ -696,20 +698,23 @@ void exportKalibr(const Rig& rig, const fs::path& camchain) {
   rig.validate();
   if (rig.cameras.empty()) throw Error("no cameras to write", cameraFileContext(camchain, "", "cameras"));
   std::ostringstream out;
-  out << "# Kalibr camchain written by previz: pinhole-radtan, T_cn_cnm1 maps camera n-1 points into camera n,\n"
+  out << "# Kalibr camchain written by previz: pinhole-radtan or pinhole-equi, T_cn_cnm1 maps camera n-1 points into camera n,\n"
          "# metres. cam0.T_world_cam (previz) places the chain in previz's world (z up, floor z = 0).\n";
   for (size_t n = 0; n < rig.cameras.size(); ++n) {
     const RigCamera& rc = rig.cameras[n];
     const Camera& c = rc.camera;
     requireNoSkew(c, camchain, "Kalibr's pinhole model");
-    if (c.dist.k3 != 0.0)
+    const bool kb = c.dist.model == LensModel::kKannalaBrandt;
+    if (!kb && c.dist.k3 != 0.0)
       throw Error("Kalibr's radtan model has no k3 (got " + exact(c.dist.k3) + ")", cameraFileContext(camchain, c.name, "distortion.k3"));
     out << "cam" << n << ":\n";
     if (n == 0) writeYamlTransform(out, "T_world_cam", rc.T_world_cam);
     else writeYamlTransform(out, "T_cn_cnm1", rc.T_world_cam.inverse() * rig.cameras[n - 1].T_world_cam);
     out << "  camera_model: pinhole\n"
-        << "  distortion_coeffs: " << yamlRow({c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2}) << "\n"
-        << "  distortion_model: radtan\n"
+        << "  distortion_coeffs: "
+        << (kb ? yamlRow({c.dist.k1, c.dist.k2, c.dist.k3, c.dist.k4}) : yamlRow({c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2}))
+        << "\n"
+        << "  distortion_model: " << (kb ? "equidistant" : "radtan") << "\n"
         << "  intrinsics: " << yamlRow({c.fx, c.fy, c.cx, c.cy}) << "\n"
         << "  resolution: [" << c.width << ", " << c.height << "]\n";
     std::string topic = "/" + c.name + "/image_raw";
@@ -841,7 +846,11 @@ std::vector<fs::path> exportColmap(const Rig& rig, const fs::path& dir) {
     const std::string id = std::to_string(i + 1);
     const std::string cx = exact(c.cx + 0.5), cy = exact(c.cy + 0.5);
     cams << id << " ";
-    if (c.dist.isZero()) {
+    if (c.dist.model == LensModel::kKannalaBrandt) {
+      cams << "OPENCV_FISHEYE " << c.width << " " << c.height << " " << exact(c.fx) << " " << exact(c.fy) << " " << cx
+           << " " << cy << " " << exact(c.dist.k1) << " " << exact(c.dist.k2) << " " << exact(c.dist.k3) << " "
+           << exact(c.dist.k4);
+    } else if (c.dist.isZero()) {
       cams << "PINHOLE " << c.width << " " << c.height << " " << exact(c.fx) << " " << exact(c.fy) << " " << cx << " " << cy;
     } else {
       cams << (c.dist.k3 == 0.0 ? "OPENCV " : "FULL_OPENCV ") << c.width << " " << c.height << " " << exact(c.fx) << " "

@@ -25,16 +25,19 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
   throw Error("render: " + field + " " + message, context);
 }
 
-// The Brown model of core/lens_model.h, evaluated together with its Jacobian in one pass (inline:
-// the inner loop inverts it for every sample; Camera::distort/distortJacobian return through two
-// out-of-line calls each, which cost more than the arithmetic). The test
-// Render.PixelRayEqualsUnprojectAndProjectsBackBelowNanoPixel holds this copy to Camera::unproject.
+// The camera's lens model of core/lens_model.h (Brown–Conrady or Kannala–Brandt), evaluated
+// together with its Jacobian in one pass (inline: the inner loop inverts it for every sample;
+// Camera::distort/distortJacobian return through two out-of-line calls each, which cost more than
+// the arithmetic). The test Render.PixelRayEqualsUnprojectAndProjectsBackBelowNanoPixel holds
+// this Newton to Camera::unproject.
 struct Brown {
-  double k1, k2, k3, p1, p2;
+  double k1, k2, k3, k4, p1, p2;
+  bool kannala_brandt;
   double r2_max;  // squared ideal radius where the radial map folds (inf when it never does)
 
   explicit Brown(const Camera& c)
-      : k1(c.dist.k1), k2(c.dist.k2), k3(c.dist.k3), p1(c.dist.p1), p2(c.dist.p2) {
+      : k1(c.dist.k1), k2(c.dist.k2), k3(c.dist.k3), k4(c.dist.k4), p1(c.dist.p1), p2(c.dist.p2),
+        kannala_brandt(c.dist.model == LensModel::kKannalaBrandt) {
     const double r = c.maxInvertibleRadius();
     r2_max = std::isfinite(r) ? r * r : std::numeric_limits<double>::infinity();
   }
@@ -42,7 +45,8 @@ struct Brown {
   // f = distort(x) - target, J = d distort / dx.
   void evaluate(double x, double y, double tx, double ty, double& fx, double& fy, double& j00,
                 double& j01, double& j10, double& j11) const {
-    lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, x, y, fx, fy, j00, j01, j11);
+    if (kannala_brandt) lens::kannalaBrandtDistortWithJacobian(k1, k2, k3, k4, x, y, fx, fy, j00, j01, j11);
+    else lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, x, y, fx, fy, j00, j01, j11);
     fx -= tx;
     fy -= ty;
     j10 = j01;

@@ -292,6 +292,8 @@ struct Params {
                                             intr(p.cameras.size()), scale(p.rig_scale) {
     for (size_t i = 0; i < p.cameras.size(); ++i) {
       poseToParams(p.cameras[i].T_world_cam, cams[i].data());
+      // rigResidual's hand-written Jacobians are Brown-Conrady's.
+      requireBrownConrady(p.cameras[i].camera.name, p.cameras[i].camera.dist, "the rig bundle adjustment");
       calib::detail::cameraToVector(p.cameras[i].camera, intr[i].data());
     }
     for (size_t j = 0; j < p.boards.size(); ++j) poseToParams(p.boards[j].T_world_board, boards[j].data());
@@ -299,7 +301,7 @@ struct Params {
   void writeBack(BundleProblem& p) const {
     for (size_t i = 0; i < p.cameras.size(); ++i) {
       p.cameras[i].T_world_cam = paramsToPose(cams[i].data());
-      if (!p.cameras[i].free_intrinsics.empty()) calib::detail::vectorToCamera(intr[i].data(), p.cameras[i].camera);
+      if (!p.cameras[i].free_intrinsics.empty()) calib::detail::vectorToCamera(intr[i].data(), p.cameras[i].camera.dist.model, p.cameras[i].camera);
     }
     for (size_t j = 0; j < p.boards.size(); ++j) p.boards[j].T_world_board = paramsToPose(boards[j].data());
     p.rig_scale = scale;

@@ -1,7 +1,7 @@
 #pragma once
 // The projection the intrinsic solve, view selection and uncertainty maps differentiate:
-// core/camera.h's camera (OpenCV's Brown–Conrady of core/lens_model.h, skew included) with Ceres'
-// Jets flowing through it. Internal to previz_calib.
+// core/camera.h's camera (its lens model of core/lens_model.h, skew included) with Ceres' Jets
+// flowing through it. Internal to previz_calib.
 #include <cmath>
 
 #include <Eigen/Core>
@@ -13,8 +13,10 @@
 
 namespace previz::calib::detail {
 
-// Intrinsic vector layout, shared by the solve, the covariance and the reports.
-enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kSkew, kK1, kK2, kP1, kP2, kK3, kIntrinsicCount };
+// Intrinsic vector layout, shared by the solve, the covariance and the reports. The lens model
+// (Camera::dist.model) says which distortion slots are used: Brown–Conrady k1 k2 p1 p2 k3 (k4
+// held at 0), Kannala–Brandt k1 k2 k3 k4 (p1 p2 held at 0); it travels beside the vector.
+enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kSkew, kK1, kK2, kP1, kP2, kK3, kK4, kIntrinsicCount };
 
 inline void cameraToVector(const Camera& c, double* v) {
   v[kFx] = c.fx;
@@ -27,9 +29,11 @@ inline void cameraToVector(const Camera& c, double* v) {
   v[kP1] = c.dist.p1;
   v[kP2] = c.dist.p2;
   v[kK3] = c.dist.k3;
+  v[kK4] = c.dist.k4;
 }
 
-inline void vectorToCamera(const double* v, Camera& c) {
+inline void vectorToCamera(const double* v, LensModel model, Camera& c) {
+  c.dist.model = model;
   c.fx = v[kFx];
   c.fy = v[kFy];
   c.cx = v[kCx];
@@ -40,16 +44,20 @@ inline void vectorToCamera(const double* v, Camera& c) {
   c.dist.p1 = v[kP1];
   c.dist.p2 = v[kP2];
   c.dist.k3 = v[kK3];
+  c.dist.k4 = v[kK4];
 }
 
 // Camera-frame point -> pixel. fy is intr[kFy] unless aspect > 0, in which case fy = aspect * fx
 // (the fix_aspect lock ties the two instead of freezing fy).
 template <typename T>
-inline void projectCameraPoint(const T* intr, const T* p, double aspect, T* uv) {
+inline void projectCameraPoint(const T* intr, const T* p, double aspect, LensModel model, T* uv) {
   const T x = p[0] / p[2];
   const T y = p[1] / p[2];
   T xd, yd;
-  lens::brownDistort(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd);
+  if (model == LensModel::kKannalaBrandt)
+    lens::kannalaBrandtDistort(intr[kK1], intr[kK2], intr[kK3], intr[kK4], x, y, xd, yd);
+  else
+    lens::brownDistort(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd);
   const T fy = aspect > 0 ? T(aspect) * intr[kFx] : intr[kFy];
   uv[0] = intr[kFx] * xd + intr[kSkew] * yd + intr[kCx];
   uv[1] = fy * yd + intr[kCy];
@@ -57,27 +65,27 @@ inline void projectCameraPoint(const T* intr, const T* p, double aspect, T* uv) 
 
 // Board point -> pixel through pose = (angle-axis, translation) of T_cam_board.
 template <typename T>
-inline void projectBoardPoint(const T* intr, const T* pose, const T* p_board, double aspect,
+inline void projectBoardPoint(const T* intr, const T* pose, const T* p_board, double aspect, LensModel model,
                               T* uv) {
   T p[3];
   ceres::AngleAxisRotatePoint(pose, p_board, p);
   p[0] += pose[3];
   p[1] += pose[4];
   p[2] += pose[5];
-  projectCameraPoint(intr, p, aspect, uv);
+  projectCameraPoint(intr, p, aspect, model, uv);
 }
 
-// Pixel and its Jacobian with respect to [intrinsics (10), pose (6)] for one board point.
+// Pixel and its Jacobian with respect to [intrinsics (11), pose (6)] for one board point.
 inline Eigen::Vector2d projectBoardPointJacobian(const double* intr, const double* pose,
-                                                 const Eigen::Vector3d& p_board, double aspect,
-                                                 Eigen::Matrix<double, 2, 16>& J) {
-  using Jet = ceres::Jet<double, 16>;
+                                                 const Eigen::Vector3d& p_board, double aspect, LensModel model,
+                                                 Eigen::Matrix<double, 2, kIntrinsicCount + 6>& J) {
+  using Jet = ceres::Jet<double, kIntrinsicCount + 6>;
   Jet ji[kIntrinsicCount], jp[6];
   for (int i = 0; i < kIntrinsicCount; ++i) ji[i] = Jet(intr[i], i);
   for (int i = 0; i < 6; ++i) jp[i] = Jet(pose[i], kIntrinsicCount + i);
   const Jet pb[3] = {Jet(p_board.x()), Jet(p_board.y()), Jet(p_board.z())};
   Jet uv[2];
-  projectBoardPoint(ji, jp, pb, aspect, uv);
+  projectBoardPoint(ji, jp, pb, aspect, model, uv);
   J.row(0) = uv[0].v.transpose();
   J.row(1) = uv[1].v.transpose();
   return Eigen::Vector2d(uv[0].a, uv[1].a);
@@ -85,14 +93,14 @@ inline Eigen::Vector2d projectBoardPointJacobian(const double* intr, const doubl
 
 // Pixel of a camera-frame point and its Jacobian with respect to the intrinsics (the ray held).
 inline Eigen::Vector2d projectCameraPointJacobian(const double* intr, const Eigen::Vector3d& p,
-                                                  double aspect,
+                                                  double aspect, LensModel model,
                                                   Eigen::Matrix<double, 2, kIntrinsicCount>& J) {
   using Jet = ceres::Jet<double, kIntrinsicCount>;
   Jet ji[kIntrinsicCount];
   for (int i = 0; i < kIntrinsicCount; ++i) ji[i] = Jet(intr[i], i);
   const Jet pc[3] = {Jet(p.x()), Jet(p.y()), Jet(p.z())};
   Jet uv[2];
-  projectCameraPoint(ji, pc, aspect, uv);
+  projectCameraPoint(ji, pc, aspect, model, uv);
   J.row(0) = uv[0].v.transpose();
   J.row(1) = uv[1].v.transpose();
   return Eigen::Vector2d(uv[0].a, uv[1].a);

@@ -68,9 +68,7 @@ struct RayTable {
 
 inline bool sameLens(const Camera& a, const Camera& b) {
   return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
-         a.cx == b.cx && a.cy == b.cy && a.skew == b.skew && a.dist.k1 == b.dist.k1 &&
-         a.dist.k2 == b.dist.k2 && a.dist.p1 == b.dist.p1 && a.dist.p2 == b.dist.p2 &&
-         a.dist.k3 == b.dist.k3;
+         a.cx == b.cx && a.cy == b.cy && a.skew == b.skew && a.dist == b.dist;
 }
 
 }  // namespace previz::carving::detail

@@ -24,7 +24,7 @@ using testing::thesisCamera;
 
 double intrinsic(const Camera& c, int k) {
   const double v[kIntrinsicCount] = {c.fx, c.fy, c.cx, c.cy, c.skew,
-                                     c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2, c.dist.k3};
+                                     c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2, c.dist.k3, c.dist.k4};
   return v[k];
 }
 
@@ -101,7 +101,7 @@ TEST(Intrinsics, LocksHoldTheirValuesExactly) {
   // The principal point is held 3.25 px off: the focal length absorbs little of it.
   EXPECT_NEAR(r.camera.fx, truth.fx, 2.0);
 
-  EXPECT_EQ(IntrinsicLocks::parse("fix_distortion").toString(), "fix_k1,fix_k2,fix_k3,fix_tangential");
+  EXPECT_EQ(IntrinsicLocks::parse("fix_distortion").toString(), "fix_k1,fix_k2,fix_k3,fix_k4,fix_tangential");
   try {
     IntrinsicLocks::parse("fix_k3,fix_k9");
     FAIL() << "expected an error";

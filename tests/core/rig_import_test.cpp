@@ -91,9 +91,10 @@ RigDiff compareRigs(const Rig& truth, const Rig& back, bool names = true) {
     }
     EXPECT_EQ(a.width, b.width) << a.name;
     EXPECT_EQ(a.height, b.height) << a.name;
+    EXPECT_EQ(a.dist.model, b.dist.model) << a.name;
     const double da[] = {a.fx - b.fx, a.fy - b.fy, a.cx - b.cx, a.cy - b.cy, a.skew - b.skew,
                          a.dist.k1 - b.dist.k1, a.dist.k2 - b.dist.k2, a.dist.p1 - b.dist.p1,
-                         a.dist.p2 - b.dist.p2, a.dist.k3 - b.dist.k3};
+                         a.dist.p2 - b.dist.p2, a.dist.k3 - b.dist.k3, a.dist.k4 - b.dist.k4};
     for (double x : da) d.intrinsics = std::max(d.intrinsics, std::abs(x));
     const Pose& Ta = truth.cameras[i].T_world_cam;
     const Pose& Tb = back.cameras[i].T_world_cam;
@@ -526,18 +527,24 @@ TEST(RigImport, KalibrCamerasChainByNumberNotByKeyOrder) {
   expectRoundTrip("Kalibr camchain, keys sorted as text", truth, importKalibr(path, {}).rig);
 }
 
-TEST(RigImport, KalibrFisheyeAndMalformedFilesAreRefusedNamingCameraAndLine) {
+TEST(RigImport, KalibrEquidistantIsKannalaBrandtAndMalformedFilesAreRefusedNamingCameraAndLine) {
   const fs::path dir = tmpDir("kalibr_bad");
+  // Kalibr's pinhole-equi is OpenCV fisheye's Kannala-Brandt, its four coefficients k1..k4.
   std::string fisheye = kKalibrCamchain;
   fisheye.replace(fisheye.rfind("distortion_model: radtan"), 24, "distortion_model: equidistant");
   writeFileAtomic(dir / "fisheye.yaml", fisheye);
-  try {
-    importKalibr(dir / "fisheye.yaml", {});
-    FAIL() << "equidistant imported";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.context().camera, "cam1");
-    EXPECT_TRUE(contains(e.message(), "the fisheye (Kannala-Brandt) model is not supported yet")) << e.what();
-  }
+  const Rig rig = importKalibr(dir / "fisheye.yaml", {}).rig;
+  ASSERT_EQ(rig.cameras.size(), 2u);
+  EXPECT_EQ(rig.cameras[0].camera.dist.model, LensModel::kBrownConrady);
+  const Distortion& d = rig.cameras[1].camera.dist;
+  EXPECT_EQ(d.model, LensModel::kKannalaBrandt);
+  EXPECT_EQ(d.p1, 0.0);
+  EXPECT_EQ(d.p2, 0.0);
+  EXPECT_NE(d.k1, 0.0);
+  // Written back as equidistant and read again: the same lens to the last bit.
+  exportKalibr(rig, dir / "fisheye_out.yaml");
+  EXPECT_TRUE(contains(readTextFile(dir / "fisheye_out.yaml"), "distortion_model: equidistant"));
+  expectRoundTrip("Kalibr camchain with an equidistant camera", rig, importKalibr(dir / "fisheye_out.yaml", {}).rig);
   std::string unclosed = kKalibrCamchain;
   unclosed.erase(unclosed.find("1.7618711454538528e-05]") + 22, 1);
   writeFileAtomic(dir / "unclosed.yaml", unclosed);
@@ -602,16 +609,30 @@ TEST(RigImport, ColmapModelsPosesAndPixelCentresConvert) {
   EXPECT_LE((*px - (colmap_px - Eigen::Vector2d(0.5, 0.5))).norm(), 1e-12);
 }
 
-TEST(RigImport, ColmapFisheyeAndMissingFilesAreErrors) {
+TEST(RigImport, ColmapFisheyeIsKannalaBrandtOtherModelsAndMissingFilesAreErrors) {
   const fs::path dir = tmpDir("colmap_bad");
   EXPECT_THROW(importColmap(dir, {}), Error);
-  writeFileAtomic(dir / "cameras.txt", "1 OPENCV_FISHEYE 640 480 500 500 320 240 0.1 0 0 0\n");
+  writeFileAtomic(dir / "cameras.txt", "1 OPENCV_FISHEYE 640 480 500 500 320 240 0.1 -0.02 0.003 -0.0004\n");
   writeFileAtomic(dir / "images.txt", "1 1 0 0 0 0 0 0 1 a.jpg\n\n");
+  const Rig rig = importColmap(dir, {}).rig;
+  ASSERT_EQ(rig.cameras.size(), 1u);
+  const Camera& c = rig.cameras[0].camera;
+  EXPECT_EQ(c.dist.model, LensModel::kKannalaBrandt);
+  EXPECT_EQ(c.dist.k1, 0.1);
+  EXPECT_EQ(c.dist.k2, -0.02);
+  EXPECT_EQ(c.dist.k3, 0.003);
+  EXPECT_EQ(c.dist.k4, -0.0004);
+  EXPECT_EQ(c.cx, 319.5);  // COLMAP's pixel centres are at +0.5
+  // Written back as OPENCV_FISHEYE and read again: the same lens.
+  const fs::path out = dir / "out";
+  exportColmap(rig, out);
+  expectRoundTrip("COLMAP OPENCV_FISHEYE", rig, importColmap(out, {}).rig);
+  writeFileAtomic(dir / "cameras.txt", "1 FOV 640 480 500 500 320 240 0.9\n");
   try {
     importColmap(dir, {});
-    FAIL() << "fisheye imported";
+    FAIL() << "FOV imported";
   } catch (const Error& e) {
-    EXPECT_TRUE(contains(e.message(), "fisheye")) << e.what();
+    EXPECT_TRUE(contains(e.message(), "FOV")) << e.what();
     EXPECT_EQ(e.context().field, "MODEL");
   }
 }

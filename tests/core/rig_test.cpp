@@ -155,8 +155,12 @@ TEST(Rig, OtherUnitsModelsAndPixelConventionsAreRefused) {
   j["units"] = "mm";
   EXPECT_EQ(readError(j, "units").context().field, "units");
   j = rigToJson(sampleRig());
-  j["cameras"][0]["model"] = "fisheye";
+  j["cameras"][0]["model"] = "mei-unified";
   EXPECT_EQ(readError(j, "model").context().field, "cameras[0].model");
+  // A fisheye's terms are k1..k4: the Brown-Conrady p1 of this camera is refused by name.
+  j = rigToJson(sampleRig());
+  j["cameras"][0]["model"] = "kannala-brandt";
+  EXPECT_EQ(readError(j, "p1").context().field, "cameras[0].distortion.p1");
   j = rigToJson(sampleRig());
   j["cameras"][0]["distortion"]["k4"] = 0.1;
   EXPECT_EQ(readError(j, "k4").context().field, "cameras[0].distortion.k4");

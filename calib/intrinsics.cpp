@@ -159,33 +159,34 @@ std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, co
   std::vector<cv::Point2d> image;
   cv::Matx33d K(intr[kFx], intr[kSkew], intr[kCx], 0, intr[kFy], intr[kCy], 0, 0, 1);
   cv::Vec<double, 5> dist(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3]);
-  Camera camera;
-  detail::vectorToCamera(intr, model, camera);
+  // OpenCV's solvePnP knows Brown-Conrady only. Another lens's points are turned into rays and
+  // seen by a virtual pinhole looking along their mean (R_virtual_cam): a board across a wide
+  // angle is then near that pinhole's axis, where normalized coordinates stay finite.
+  Eigen::Matrix3d R_virtual_cam = Eigen::Matrix3d::Identity();
   if (model == LensModel::kBrownConrady) {
     for (size_t i = 0; i < vp.ids.size(); ++i) {
       image.emplace_back(vp.px[i].x(), vp.px[i].y());
       object.emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
     }
   } else {
-    // OpenCV's solvePnP knows Brown-Conrady only: other lenses are undistorted here and solved
-    // as a pinhole on ideal normalized coordinates, from the points within 60 degrees of the
-    // axis where there are enough (near 90 degrees those coordinates run off to infinity).
-    std::vector<cv::Point3d> far_object;
-    std::vector<cv::Point2d> far_image;
+    Camera camera;
+    detail::vectorToCamera(intr, model, camera);
+    std::vector<Eigen::Vector3d> rays;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     for (size_t i = 0; i < vp.ids.size(); ++i) {
-      const InverseResult r = camera.undistort(camera.pixelToNormalized(vp.px[i]));
-      if (!r.ok()) continue;
-      const bool near_axis = r.point.squaredNorm() <= 3.0;  // tan^2 60 degrees
-      (near_axis ? image : far_image).emplace_back(r.point.x(), r.point.y());
-      (near_axis ? object : far_object).emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
+      const auto ray = camera.unproject(vp.px[i]);
+      if (!ray) continue;
+      rays.push_back(*ray);
+      mean += *ray;
+      object.emplace_back(vp.p_board[i].x(), vp.p_board[i].y(), vp.p_board[i].z());
     }
-    if (object.size() < 6) {
-      object.insert(object.end(), far_object.begin(), far_object.end());
-      image.insert(image.end(), far_image.begin(), far_image.end());
+    if (rays.size() < 4 || !(mean.norm() > 0)) return std::nullopt;
+    R_virtual_cam = Eigen::Quaterniond::FromTwoVectors(mean.normalized(), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    for (const Eigen::Vector3d& ray : rays) {
+      const Eigen::Vector3d q = R_virtual_cam * ray;
+      if (!(q.z() > 1e-3)) return std::nullopt;  // the board spans 180 degrees of the virtual view
+      image.emplace_back(q.x() / q.z(), q.y() / q.z());
     }
-  }
-  if (object.size() < 4) return std::nullopt;
-  if (model != LensModel::kBrownConrady) {
     K = cv::Matx33d::eye();
     dist = cv::Vec<double, 5>::all(0.0);
   }
@@ -193,12 +194,22 @@ std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, co
   bool ok = false;
   try {
     ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_IPPE);
-    // IPPE can return the mirror solution behind the camera (a board seen across a wide angle).
-    if (!ok || !(tvec[2] > 0)) ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
+    if (!ok) ok = cv::solvePnP(object, image, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
   } catch (const cv::Exception&) {
     ok = false;
   }
   if (!ok || !(tvec[2] > 0)) return std::nullopt;
+  if (model != LensModel::kBrownConrady) {
+    // T_cam_board = R_virtual_cam^T T_virtual_board.
+    Pose T_cam_virtual = Pose::Identity();
+    T_cam_virtual.linear() = R_virtual_cam.transpose();
+    const Pose T = T_cam_virtual * poseFromRvecTvec(Eigen::Vector3d(rvec[0], rvec[1], rvec[2]),
+                                                    Eigen::Vector3d(tvec[0], tvec[1], tvec[2]));
+    Eigen::Vector3d r, t;
+    poseToRvecTvec(T, r, t);
+    rvec = cv::Vec3d(r.x(), r.y(), r.z());
+    tvec = cv::Vec3d(t.x(), t.y(), t.z());
+  }
   std::array<double, 6> pose = {rvec[0], rvec[1], rvec[2], tvec[0], tvec[1], tvec[2]};
   if (!refine) return pose;
   ceres::Problem problem;

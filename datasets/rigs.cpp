@@ -90,7 +90,7 @@ std::string witnessName(int index) {
   return name;
 }
 
-RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int height) {
+RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int height, bool fisheye) {
   if (index < 0 || index >= count) {
     ErrorContext context;
     context.field = "witness_cameras";
@@ -111,14 +111,19 @@ RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int
   c.dist.p1 = lens_rng.uniform(-0.001, 0.001);
   c.dist.p2 = lens_rng.uniform(-0.001, 0.001);
   c.dist.k3 = 0.0;
+  if (fisheye) {
+    // The same draws for the position of the principal point; a short equidistant-like lens.
+    c.fx = c.fy = lens_rng.uniform(470.0, 520.0);
+    c.dist = Distortion::kannalaBrandt(lens_rng.uniform(-0.02, 0.03), lens_rng.uniform(-0.01, 0.005), 0.001, 0.0);
+  }
   // Strong barrel lenses need a positive k2 to keep the corners invertible (the radial map is
   // monotone everywhere when 9 k1^2 < 20 k2); redraw k2 until the whole image is covered.
-  bool covered = false;
-  for (int attempt = 0; attempt < 64 && !covered; ++attempt) {
+  bool covered = fisheye && lensCoversImage(c);
+  for (int attempt = 0; attempt < 64 && !covered && !fisheye; ++attempt) {
     c.dist.k2 = lens_rng.uniform(-0.02, 0.05);
     covered = lensCoversImage(c);
   }
-  if (!covered) {
+  if (!covered && !fisheye) {
     c.dist.k2 = 0.5 * c.dist.k1 * c.dist.k1 + 0.01;
     covered = lensCoversImage(c);
   }
@@ -179,8 +184,8 @@ Pose mainCameraPose(double time_s, double duration_s, bool dolly) {
 Rig studioRig(const StudioRigOptions& options, double duration_s, bool dolly) {
   Rig rig;
   for (int i = 0; i < options.witness_cameras; ++i) {
-    rig.cameras.push_back(witnessCamera(i, options.witness_cameras, options.seed,
-                                        options.witness_width, options.witness_height));
+    rig.cameras.push_back(witnessCamera(i, options.witness_cameras, options.seed, options.witness_width,
+                                        options.witness_height, i < options.fisheye_witnesses));
   }
   if (options.with_main) {
     RigCamera main;

@@ -36,7 +36,9 @@ std::string witnessName(int index);
 // invertible domain), then scaled to width x height; pose on a circle of radius 4.2–4.8 m at
 // 2.0–2.7 m height aimed at witnessAimPoint() (+-5 cm). The layout leaves a gap around the main camera's
 // line of sight (azimuth -90 degrees).
-RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int height);
+// fisheye: a Kannala–Brandt lens (f 470–520 px at the design size: the image corners ~80
+// degrees off the axis, a 160-degree diagonal) instead of the Brown–Conrady witness lens.
+RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int height, bool fisheye = false);
 
 // Main (film) camera "main": fx = 1500 at 1920x1080, k1 = -0.06, k2 = 0.02, scaled to
 // width x height.
@@ -53,6 +55,8 @@ struct StudioRigOptions {
   int witness_width = kWitnessDesignWidth, witness_height = kWitnessDesignHeight;
   int main_width = kMainDesignWidth, main_height = kMainDesignHeight;
   bool with_main = true;
+  // The first fisheye_witnesses witnesses (index order) have a fisheye lens (witnessCamera).
+  int fisheye_witnesses = 0;
 };
 // Witness cameras in index order, then "main" at its pose at t = 0 (no dolly offset applied
 // beyond mainCameraPose(0, ...)).

@@ -63,13 +63,13 @@ std::vector<std::vector<int>> freeIntrinsics(const Rig& rig, const RigCalibOptio
   std::vector<std::vector<int>> out(rig.cameras.size());
   for (const std::string& name : options.estimate_intrinsics) {
     if (name == "*") {
-      for (auto& f : out) f = detail::defaultFreeIntrinsics();
+      for (size_t i = 0; i < rig.cameras.size(); ++i) out[i] = detail::defaultFreeIntrinsics(rig.cameras[i].camera.dist.model);
       continue;
     }
     bool found = false;
     for (size_t i = 0; i < rig.cameras.size(); ++i) {
       if (rig.cameras[i].camera.name == name) {
-        out[i] = detail::defaultFreeIntrinsics();
+        out[i] = detail::defaultFreeIntrinsics(rig.cameras[i].camera.dist.model);
         found = true;
       }
     }

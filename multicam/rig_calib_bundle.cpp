@@ -107,7 +107,7 @@ struct Linearized {
   Eigen::Matrix<double, 2, kIntrinsicCount> J_intr;
 };
 
-bool rigResidual(const double* intr, const Eigen::Matrix3d& R_wc, const Eigen::Vector3d& C,
+bool rigResidual(const double* intr, LensModel model, const Eigen::Matrix3d& R_wc, const Eigen::Vector3d& C,
                  const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& t_wb,
                  const Eigen::Vector3d& p_board, const Eigen::Vector2d& px, bool jacobians,
                  bool intr_jacobian, Linearized& out) {
@@ -118,11 +118,16 @@ bool rigResidual(const double* intr, const Eigen::Matrix3d& R_wc, const Eigen::V
   if (!(p.z() > 1e-9)) return false;
   const double iz = 1.0 / p.z();
   const double x = p.x() * iz, y = p.y() * iz;
-  // core/lens_model.h's Brown–Conrady and d(xd, yd) / d(x, y).
+  // core/lens_model.h's lens and d(xd, yd) / d(x, y).
+  const bool kb = model == LensModel::kKannalaBrandt;
   double xd, yd;
   Eigen::Matrix2d D;
-  lens::brownDistortWithJacobian(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd, D(0, 0),
-                                 D(0, 1), D(1, 1));
+  if (kb)
+    lens::kannalaBrandtDistortWithJacobian(intr[kK1], intr[kK2], intr[kK3], intr[kK4], x, y, xd, yd, D(0, 0),
+                                           D(0, 1), D(1, 1));
+  else
+    lens::brownDistortWithJacobian(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd, D(0, 0),
+                                   D(0, 1), D(1, 1));
   D(1, 0) = D(0, 1);
   const double fx = intr[kFx], fy = intr[kFy], s = intr[kSkew];
   out.r = px - Eigen::Vector2d(fx * xd + s * yd + intr[kCx], fy * yd + intr[kCy]);
@@ -139,16 +144,27 @@ bool rigResidual(const double* intr, const Eigen::Matrix3d& R_wc, const Eigen::V
   out.J_board.leftCols<3>() = -J_w * skew(rotated);        // exp(d) v = v + d x v
   out.J_board.rightCols<3>() = J_w;
   if (!intr_jacobian) return true;
-  // d(xd, yd) / d(k1 k2 p1 p2 k3), then through K.
-  Eigen::Matrix<double, 2, 5, Eigen::RowMajor> Dk;
-  lens::brownCoefficientJacobian(x, y, Dk.data());
-  const Eigen::Matrix<double, 2, 5> Jk = -K * Dk;
   out.J_intr.setZero();
   out.J_intr(0, kFx) = -xd;
   out.J_intr(0, kSkew) = -yd;
   out.J_intr(0, kCx) = -1.0;
   out.J_intr(1, kFy) = -yd;
   out.J_intr(1, kCy) = -1.0;
+  if (kb) {
+    // d(xd, yd) / d(k1 k2 k3 k4), then through K.
+    Eigen::Matrix<double, 2, 4, Eigen::RowMajor> Dk;
+    lens::kannalaBrandtCoefficientJacobian(x, y, Dk.data());
+    const Eigen::Matrix<double, 2, 4> Jk = -K * Dk;
+    out.J_intr.col(kK1) = Jk.col(0);
+    out.J_intr.col(kK2) = Jk.col(1);
+    out.J_intr.col(kK3) = Jk.col(2);
+    out.J_intr.col(kK4) = Jk.col(3);
+    return true;
+  }
+  // d(xd, yd) / d(k1 k2 p1 p2 k3), then through K.
+  Eigen::Matrix<double, 2, 5, Eigen::RowMajor> Dk;
+  lens::brownCoefficientJacobian(x, y, Dk.data());
+  const Eigen::Matrix<double, 2, 5> Jk = -K * Dk;
   out.J_intr.col(kK1) = Jk.col(0);
   out.J_intr.col(kK2) = Jk.col(1);
   out.J_intr.col(kP1) = Jk.col(2);
@@ -171,16 +187,16 @@ void fillPoseJacobian(const Eigen::Matrix<double, 2, 6>& J, double* out) {
 // Intrinsics held: baked in; parameter blocks (camera pose, board pose).
 class FixedIntrinsicsCost final : public ceres::SizedCostFunction<2, kPoseSize, kPoseSize> {
  public:
-  FixedIntrinsicsCost(const double* intr, const Eigen::Vector3d& p_board, const Eigen::Vector2d& px,
+  FixedIntrinsicsCost(const double* intr, LensModel model, const Eigen::Vector3d& p_board, const Eigen::Vector2d& px,
                       const double* weight)
-      : p_board_(p_board), px_(px), weight_(weight) {
+      : model_(model), p_board_(p_board), px_(px), weight_(weight) {
     std::copy(intr, intr + kIntrinsicCount, intr_);
   }
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     const double* cam = parameters[0];
     const double* board = parameters[1];
     Linearized l;
-    if (!rigResidual(intr_, paramsRotation(cam), Eigen::Vector3d(cam[4], cam[5], cam[6]), paramsRotation(board),
+    if (!rigResidual(intr_, model_, paramsRotation(cam), Eigen::Vector3d(cam[4], cam[5], cam[6]), paramsRotation(board),
                      Eigen::Vector3d(board[4], board[5], board[6]), p_board_, px_, jacobians != nullptr, false, l))
       return false;
     const double w = *weight_;
@@ -195,6 +211,7 @@ class FixedIntrinsicsCost final : public ceres::SizedCostFunction<2, kPoseSize, 
 
  private:
   double intr_[kIntrinsicCount];
+  LensModel model_;
   Eigen::Vector3d p_board_;
   Eigen::Vector2d px_;
   const double* weight_;
@@ -203,14 +220,14 @@ class FixedIntrinsicsCost final : public ceres::SizedCostFunction<2, kPoseSize, 
 // Intrinsics solved: parameter blocks (intrinsics, camera pose, board pose).
 class FreeIntrinsicsCost final : public ceres::SizedCostFunction<2, kIntrinsicCount, kPoseSize, kPoseSize> {
  public:
-  FreeIntrinsicsCost(const Eigen::Vector3d& p_board, const Eigen::Vector2d& px, const double* weight)
-      : p_board_(p_board), px_(px), weight_(weight) {}
+  FreeIntrinsicsCost(LensModel model, const Eigen::Vector3d& p_board, const Eigen::Vector2d& px, const double* weight)
+      : model_(model), p_board_(p_board), px_(px), weight_(weight) {}
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     const double* cam = parameters[1];
     const double* board = parameters[2];
     Linearized l;
     const bool want = jacobians != nullptr;
-    if (!rigResidual(parameters[0], paramsRotation(cam), Eigen::Vector3d(cam[4], cam[5], cam[6]),
+    if (!rigResidual(parameters[0], model_, paramsRotation(cam), Eigen::Vector3d(cam[4], cam[5], cam[6]),
                      paramsRotation(board), Eigen::Vector3d(board[4], board[5], board[6]), p_board_, px_, want,
                      want && jacobians[0] != nullptr, l))
       return false;
@@ -229,6 +246,7 @@ class FreeIntrinsicsCost final : public ceres::SizedCostFunction<2, kIntrinsicCo
   }
 
  private:
+  LensModel model_;
   Eigen::Vector3d p_board_;
   Eigen::Vector2d px_;
   const double* weight_;
@@ -238,16 +256,16 @@ class FreeIntrinsicsCost final : public ceres::SizedCostFunction<2, kIntrinsicCo
 // parameter blocks (board pose, rig scale). d r / d scale = (d r / d C) C0.
 class ScaledHeldCameraCost final : public ceres::SizedCostFunction<2, kPoseSize, 1> {
  public:
-  ScaledHeldCameraCost(const double* intr, const Pose& T_world_cam, const Eigen::Vector3d& p_board,
+  ScaledHeldCameraCost(const double* intr, LensModel model, const Pose& T_world_cam, const Eigen::Vector3d& p_board,
                        const Eigen::Vector2d& px, const double* weight)
-      : R_wc_(T_world_cam.linear()), C_(T_world_cam.translation()), p_board_(p_board), px_(px), weight_(weight) {
+      : model_(model), R_wc_(T_world_cam.linear()), C_(T_world_cam.translation()), p_board_(p_board), px_(px), weight_(weight) {
     std::copy(intr, intr + kIntrinsicCount, intr_);
   }
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     const double* board = parameters[0];
     const double scale = parameters[1][0];
     Linearized l;
-    if (!rigResidual(intr_, R_wc_, scale * C_, paramsRotation(board), Eigen::Vector3d(board[4], board[5], board[6]),
+    if (!rigResidual(intr_, model_, R_wc_, scale * C_, paramsRotation(board), Eigen::Vector3d(board[4], board[5], board[6]),
                      p_board_, px_, jacobians != nullptr, false, l))
       return false;
     const double w = *weight_;
@@ -266,6 +284,7 @@ class ScaledHeldCameraCost final : public ceres::SizedCostFunction<2, kPoseSize,
 
  private:
   double intr_[kIntrinsicCount];
+  LensModel model_;
   Eigen::Matrix3d R_wc_;
   Eigen::Vector3d C_, p_board_;
   Eigen::Vector2d px_;
@@ -286,15 +305,15 @@ double median(std::vector<double> v) {
 struct Params {
   std::vector<std::array<double, kPoseSize>> cams, boards;
   std::vector<std::array<double, kIntrinsicCount>> intr;
+  std::vector<LensModel> models;
   double scale = 1.0;
 
   explicit Params(const BundleProblem& p) : cams(p.cameras.size()), boards(p.boards.size()),
                                             intr(p.cameras.size()), scale(p.rig_scale) {
     for (size_t i = 0; i < p.cameras.size(); ++i) {
       poseToParams(p.cameras[i].T_world_cam, cams[i].data());
-      // rigResidual's hand-written Jacobians are Brown-Conrady's.
-      requireBrownConrady(p.cameras[i].camera.name, p.cameras[i].camera.dist, "the rig bundle adjustment");
       calib::detail::cameraToVector(p.cameras[i].camera, intr[i].data());
+      models.push_back(p.cameras[i].camera.dist.model);
     }
     for (size_t j = 0; j < p.boards.size(); ++j) poseToParams(p.boards[j].T_world_board, boards[j].data());
   }
@@ -311,7 +330,7 @@ struct Params {
     const double* cam = cams[pt.camera].data();
     const double* board = boards[pt.board].data();
     Linearized l;
-    const bool ok = rigResidual(intr[pt.camera].data(), paramsRotation(cam),
+    const bool ok = rigResidual(intr[pt.camera].data(), models[pt.camera], paramsRotation(cam),
                                 scale * Eigen::Vector3d(cam[4], cam[5], cam[6]), paramsRotation(board),
                                 Eigen::Vector3d(board[4], board[5], board[6]), pt.p_board, pt.px, false, false, l);
     if (in_front) *in_front = ok;
@@ -385,8 +404,9 @@ bool updateWeights(BundleProblem& p, const std::vector<double>& norms) {
 
 }  // namespace
 
-std::vector<int> defaultFreeIntrinsics() {
+std::vector<int> defaultFreeIntrinsics(LensModel model) {
   using namespace calib::detail;
+  if (model == LensModel::kKannalaBrandt) return {kFx, kFy, kCx, kCy, kK1, kK2};
   return {kFx, kFy, kCx, kCy, kK1, kK2, kP1, kP2};
 }
 
@@ -396,7 +416,7 @@ Eigen::Vector2d bundleResidual(const BundleProblem& problem, const BundlePoint& 
   const Pose& T_wc = problem.cameras[point.camera].T_world_cam;
   const Pose& T_wb = problem.boards[point.board].T_world_board;
   Linearized l;
-  const bool ok = rigResidual(intr, T_wc.linear(), problem.rig_scale * T_wc.translation(), T_wb.linear(),
+  const bool ok = rigResidual(intr, problem.cameras[point.camera].camera.dist.model, T_wc.linear(), problem.rig_scale * T_wc.translation(), T_wb.linear(),
                               T_wb.translation(), point.p_board, point.px, false, false, l);
   return ok && l.r.allFinite() ? l.r : Eigen::Vector2d(1e9, 1e9);
 }
@@ -435,15 +455,16 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
     double* board = params.boards[pt.board].data();
     if (scaled) {
       blocks[k] = ceres_problem.AddResidualBlock(
-          new ScaledHeldCameraCost(params.intr[pt.camera].data(), problem.cameras[pt.camera].T_world_cam, pt.p_board,
+          new ScaledHeldCameraCost(params.intr[pt.camera].data(), params.models[pt.camera],
+                                   problem.cameras[pt.camera].T_world_cam, pt.p_board,
                                    pt.px, &problem.points[k].weight),
           &loss, board, &params.scale);
     } else if (problem.cameras[pt.camera].free_intrinsics.empty()) {
       blocks[k] = ceres_problem.AddResidualBlock(
-          new FixedIntrinsicsCost(params.intr[pt.camera].data(), pt.p_board, pt.px, &problem.points[k].weight), &loss,
+          new FixedIntrinsicsCost(params.intr[pt.camera].data(), params.models[pt.camera], pt.p_board, pt.px, &problem.points[k].weight), &loss,
           cam, board);
     } else {
-      blocks[k] = ceres_problem.AddResidualBlock(new FreeIntrinsicsCost(pt.p_board, pt.px, &problem.points[k].weight), &loss,
+      blocks[k] = ceres_problem.AddResidualBlock(new FreeIntrinsicsCost(params.models[pt.camera], pt.p_board, pt.px, &problem.points[k].weight), &loss,
                                                  params.intr[pt.camera].data(), cam, board);
     }
     cam_used[pt.camera] = true;
@@ -463,9 +484,12 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
     if (c.pose_fixed) ceres_problem.SetParameterBlockConstant(params.cams[i].data());
     ordering->AddElementToGroup(params.cams[i].data(), 1);
     if (!c.free_intrinsics.empty()) {
+      // Held: what is not free, and the terms the camera's lens model does not have.
+      const bool kb = c.camera.dist.model == LensModel::kKannalaBrandt;
       std::vector<int> held;
       for (int k = 0; k < kIntrinsicCount; ++k)
-        if (std::find(c.free_intrinsics.begin(), c.free_intrinsics.end(), k) == c.free_intrinsics.end())
+        if (std::find(c.free_intrinsics.begin(), c.free_intrinsics.end(), k) == c.free_intrinsics.end() ||
+            (kb ? (k == calib::detail::kP1 || k == calib::detail::kP2) : k == calib::detail::kK4))
           held.push_back(k);
       if (!held.empty()) {
         intrinsic_manifolds.push_back(std::make_unique<ceres::SubsetManifold>(kIntrinsicCount, held));
@@ -623,7 +647,7 @@ std::vector<Eigen::Matrix<double, 6, 6>> bundleCameraCovariances(const BundlePro
     const BundleBoard& board = problem.boards[pt.board];
     double intr[kIntrinsicCount];
     calib::detail::cameraToVector(cam.camera, intr);
-    if (!rigResidual(intr, cam.T_world_cam.linear(), problem.rig_scale * cam.T_world_cam.translation(),
+    if (!rigResidual(intr, cam.camera.dist.model, cam.T_world_cam.linear(), problem.rig_scale * cam.T_world_cam.translation(),
                      board.T_world_board.linear(), board.T_world_board.translation(), pt.p_board, pt.px, true, true,
                      l))
       return false;

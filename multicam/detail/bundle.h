@@ -72,8 +72,9 @@ struct BundleStats {
 };
 
 // The free intrinsics when a camera's intrinsics are estimated: focal lengths, principal point,
-// k1 k2 p1 p2 (skew and k3 stay as given: a rig capture rarely pins k3 down).
-std::vector<int> defaultFreeIntrinsics();
+// and Brown-Conrady's k1 k2 p1 p2 (skew and k3 stay as given: a rig capture rarely pins k3 down)
+// or Kannala-Brandt's k1 k2 (k3 k4 as given).
+std::vector<int> defaultFreeIntrinsics(LensModel model);
 
 // Solves in place: the camera and board poses (and free intrinsics) move, outlier points get
 // active = false. Points whose camera or board is absent from the problem are ignored. Points

@@ -185,6 +185,36 @@ TEST(RigCalibObservations, EstimatesTheIntrinsicsOfTheCamerasListed) {
   EXPECT_EQ(r.rig.at("witness01").camera.fx, capture.truth.at("witness01").camera.fx);
 }
 
+// Issue 34: a rig that mixes lens models, 4 fisheye (Kannala-Brandt, 160-degree diagonal) and 4
+// Brown-Conrady witnesses plus the main camera: the same bounds as an all-Brown rig, and a
+// fisheye's intrinsics solved when listed.
+TEST(RigCalibObservations, MixedFisheyeAndBrownRigWithinTheSameBounds) {
+  ProjectedCaptureOptions o;
+  o.rig.fisheye_witnesses = 4;
+  o.frames = 200;
+  const auto capture = projectedCapture(o);
+  ASSERT_EQ(capture.truth.at("witness01").camera.dist.model, LensModel::kKannalaBrandt);
+  ASSERT_EQ(capture.truth.at("witness05").camera.dist.model, LensModel::kBrownConrady);
+  Rig initial = testing::intrinsicsOnly(capture.truth);
+  Camera& wrong = initial.at("witness02").camera;
+  wrong.fx *= 1.01;
+  wrong.fy *= 1.01;
+  wrong.dist.k1 += 0.01;
+  RigCalibOptions options;
+  options.estimate_intrinsics = {"witness02"};
+  const RigCalibResult r = calibrateRig(capture.obs, initial, options);
+  const auto errors = testing::rigErrors(r, capture.truth, "observations, 4 fisheye + 4 Brown witnesses");
+  expectWithinBounds(errors, false);
+  expectInsideThreeSigmaEllipsoid(errors);
+  const Camera& est = r.rig.at("witness02").camera;
+  const Camera& truth = capture.truth.at("witness02").camera;
+  EXPECT_EQ(est.dist.model, LensModel::kKannalaBrandt);
+  EXPECT_EQ(est.dist.p1, 0.0);
+  EXPECT_NEAR(est.fx, truth.fx, 1e-3 * truth.fx);
+  EXPECT_NEAR(est.dist.k1, truth.dist.k1, 0.005);
+  EXPECT_NEAR(r.sigma_px, 0.2, 0.01);
+}
+
 TEST(RigCalibObservations, CameraSharingNoBoardViewIsNamed) {
   const auto capture = shortCapture(100);
   const RigObservations obs = isolate(capture.obs, "witness04");

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -31,6 +32,7 @@
 #include "core/detail/imgcodecs_plugin.h"
 #include "core/error.h"
 #include "core/plugin.h"
+#include "core/write_fault.h"
 
 namespace fs = std::filesystem;
 
@@ -60,7 +62,27 @@ const detail::ImgcodecsPlugin& imgcodecs() {
                                                   "image formats other than PNG, JPEG and EXR: OpenCV's imgcodecs");
 }
 
+std::mutex& writeFaultMutex() {
+  static std::mutex m;
+  return m;
+}
+WriteFaultHook& writeFault() {
+  static WriteFaultHook hook;
+  return hook;
+}
+
+// Whether the write fault hook (setWriteFaultHook) fails this write.
+bool injectedWriteFault(const fs::path& path) {
+  std::lock_guard<std::mutex> lock(writeFaultMutex());
+  return writeFault() && writeFault()(path);
+}
+
 }  // namespace
+
+void setWriteFaultHook(WriteFaultHook hook) {
+  std::lock_guard<std::mutex> lock(writeFaultMutex());
+  writeFault() = std::move(hook);
+}
 
 void writeFileAtomic(const fs::path& path, const std::string& bytes) {
   if (path.empty() || path.filename().empty())
@@ -85,8 +107,14 @@ void writeFileAtomic(const fs::path& path, const std::string& bytes) {
     throw Error(std::string("cannot create temporary file: ") + std::strerror(errno), fileContext(path));
   const char* p = bytes.data();
   size_t left = bytes.size();
-  while (left > 0) {
-    const ssize_t n = ::write(fd, p, left);
+  // An injected full disk (setWriteFaultHook): half the bytes go in, then ENOSPC.
+  const size_t fail_at = injectedWriteFault(path) ? bytes.size() / 2 : bytes.size() + 1;
+  for (;;) {
+    const size_t written = bytes.size() - left;
+    if (left == 0 && written < fail_at) break;
+    ssize_t n = -1;
+    if (written >= fail_at) errno = ENOSPC;
+    else n = ::write(fd, p, std::min(left, fail_at - written));
     if (n < 0) {
       if (errno == EINTR) continue;
       const int e = errno;

@@ -27,6 +27,8 @@ Runner addTrackerCommand(CLI::App& app);
 // `previz bench run` (the bench command with its verbs).
 Runner addBenchCommand(CLI::App& app);
 Runner addBatchCommand(CLI::App& app);
+// `previz soak` (live/soak.h).
+Runner addSoakCommand(CLI::App& app);
 // `previz take info | convert` (take/take.h).
 Runner addTakeCommand(CLI::App& app);
 

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   add("run", previz::app::addRunCommand);
   add("tracker", previz::app::addTrackerCommand);
   add("bench", previz::app::addBenchCommand);
+  add("soak", previz::app::addSoakCommand);
   add("demo", previz::app::addDemoCommand);
   CLI::App* help = app.add_subcommand("help", "Show the commands (or `previz <cmd> --help`)");
 

@@ -82,6 +82,8 @@ struct SoakFrame {
   int frame = 0, take_frame = 0;
   bool failed = false;
   double ms = 0;               // read + stages + write, wall time
+  double cpu_ms = 0;           // the same span's CPU time, every thread: on a shared machine
+                               // wall time also measures the other jobs
   double rss_mib = 0;          // after the frame
 };
 
@@ -98,6 +100,7 @@ struct SoakReport {
   // RSS (MiB): medians of the reference window (after warm-up) and of the last window.
   double rss_start_mib = 0, rss_end_mib = 0, rss_max_mib = 0, rss_growth = 0, max_rss_growth = 0.05;
   double ms_median = 0, ms_p99 = 0, ms_max = 0;
+  double cpu_ms_median = 0, cpu_ms_p99 = 0, cpu_ms_max = 0;
   // Outputs: every file in the ring read back whole (PNG decoded, EXR read) and found to be the
   // last frame written to its slot; temporaries left beside them.
   int output_files = 0, outputs_complete = 0;

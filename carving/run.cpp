@@ -218,7 +218,17 @@ struct CarveJob::Impl {
   std::vector<std::string> extra_depth_names;  // more cameras to write depth for
   // Carve cameras, then the depth camera and the extra depth cameras not among them.
   std::vector<std::string> input_names;
-  std::vector<Keyer> keyers;             // one per input camera, kept across frames
+  // Keying is a function of the frame alone, so that a resumed or sharded run writes what an
+  // uninterrupted one does (scripts/killtest.sh). A Keyer carried across frames is not: it
+  // takes its screen model from the first frame it keys and remembers garbage zones from every
+  // frame since (carving/keyer.h), so frame 4 keyed after frames 1..3 differed from frame 4
+  // keyed first by a resumed run (by 42 of 10668 surface cells). Each frame gets a fresh Keyer
+  // per camera, set up from the clean plate when there is one, else primed by keying the
+  // camera's reference frame (its first readable take frame) — the same for every run.
+  std::vector<KeyerOptions> keyer_options;  // per input camera
+  std::vector<cv::Mat> clean_plates;        // per input camera (empty: none)
+  std::vector<cv::Mat> reference_frames;    // per input camera without a clean plate
+  std::vector<std::string> reference_sources;
   // Per input camera: why it is dropped for the whole take ("" = used), e.g. a clean plate the
   // keyer cannot use (another size, unreadable): the camera is left out, the take goes on.
   std::vector<std::string> unusable;
@@ -263,7 +273,10 @@ struct CarveJob::Impl {
         } else {
           if (options.refine_depth) in.plates[i] = input.image;
           const std::string source = take.source(input_names[i], frame);
-          in.silhouettes[i] = keyers[i].key(input.image, source).silhouette;
+          Keyer keyer(keyer_options[i]);
+          if (!clean_plates[i].empty()) keyer.setCleanPlate(clean_plates[i], "clean plate of " + input_names[i]);
+          else if (!reference_frames[i].empty()) (void)keyer.key(reference_frames[i], reference_sources[i]);
+          in.silhouettes[i] = keyer.key(input.image, source).silhouette;
         }
       } catch (const std::exception& e) {
         in.dropped[i] = std::string("keying failed: ") + e.what();
@@ -464,12 +477,27 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
       const std::string& name = m.input_names[i];
       KeyerOptions keyer = m.options.keyer;
       if (i < m.carve_names.size()) keyer.silhouette_threshold = m.options.carve_threshold;
-      m.keyers.emplace_back(keyer);
+      m.keyer_options.push_back(keyer);
+      m.clean_plates.emplace_back();
+      m.reference_frames.emplace_back();
+      m.reference_sources.emplace_back();
       try {
         const cv::Mat clean = take.cleanPlate(name);
-        if (!clean.empty()) m.keyers.back().setCleanPlate(clean, "clean plate of " + name);
+        if (!clean.empty()) {
+          Keyer(keyer).setCleanPlate(clean, "clean plate of " + name);  // refused here, once
+          m.clean_plates.back() = clean;
+        }
       } catch (const Error& e) {
         m.unusable[i] = std::string("clean plate unusable: ") + e.what();
+      }
+      if (m.unusable[i].empty() && m.clean_plates.back().empty()) {
+        for (int f : take.frames()) {
+          const CameraFrame ref = take.read(name, f);
+          if (!ref.ok() || ref.image.empty()) continue;
+          m.reference_frames.back() = ref.image;
+          m.reference_sources.back() = take.source(name, f) + " (the keyer's reference frame)";
+          break;
+        }
       }
     }
   }

@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <algorithm>
 #include <iostream>
 #include <set>
 #include <thread>
@@ -20,6 +21,7 @@
 #include "batch/task.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/leftovers.h"
 
 namespace previz::app {
 namespace {
@@ -172,6 +174,15 @@ void waitForSlurm(batch::Backend& backend, const batch::Manifest& m, const Batch
 int runSubmit(const BatchArgs& a, bool resume) {
   const batch::Manifest m = batch::readManifest(a.job);
   batch::requireUnchangedInputs(m);
+  // What a killed local submission's processes were writing (state, ledgers, outputs): their
+  // temporaries go; the tasks about to run redo what they were for. Not after a Slurm
+  // submission: its tasks may still write from other hosts, whose pids this host cannot see.
+  {
+    const std::vector<batch::Submission> subs = batch::readSubmissions(m);
+    if (std::none_of(subs.begin(), subs.end(), [](const batch::Submission& s) { return s.backend == "slurm"; }) &&
+        !a.slurm)
+      removeLeftoverTemporaries(m.job_dir, true);
+  }
   bool use_slurm = a.slurm;
   if (resume && !a.slurm && !a.local) {
     const std::vector<batch::Submission> subs = batch::readSubmissions(m);

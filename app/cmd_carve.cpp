@@ -12,6 +12,7 @@
 #include "carving/run.h"
 #include "carving/take.h"
 #include "core/error.h"
+#include "core/leftovers.h"
 
 namespace previz::app {
 namespace {
@@ -74,6 +75,10 @@ int runCarve(const CarveArgs& a) {
   } else {
     o.extra_depth_cameras = splitList(a.depth_cameras);
   }
+  // Unsharded, this process is the folder's only writer: the temporaries of a carve killed
+  // before (kill -9: carve.jsonl's; frames' own go as they are redone) are removed. Shards may
+  // write the folder from other hosts, whose live processes a pid cannot tell.
+  if (a.shard == "0/1") removeLeftoverTemporaries(o.out, false);
   carving::CarveJob job(take, o);
   const std::vector<int> selected = job.selectedFrames();
   int to_carve = 0;

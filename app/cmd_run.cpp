@@ -33,6 +33,7 @@
 #include "composite/measure.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/leftovers.h"
 #include "core/mesh.h"
 #include "core/pose.h"
 #include "datasets/scene.h"
@@ -287,6 +288,8 @@ int runRun(const RunArgs& a) {
   }
 
   const fs::path out(a.out);
+  // Every frame is written again: the temporaries of a run killed before (kill -9) go.
+  removeLeftoverTemporaries(out, true);
   composite::OutputOptions oo;
   oo.out = out;
   oo.exr = a.exr;

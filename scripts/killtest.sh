@@ -170,6 +170,8 @@ for cmd in $commands; do
       finished=$((finished + 1))
     fi
     wait "$pid" 2> /dev/null || true
+    # The group's other members (batch tasks) die with it; wait until none is left.
+    for _ in $(seq 100); do kill -0 -- "-$pid" 2> /dev/null || break; sleep 0.05; done
     c=$("$check" $(checked "$cmd" "$out")) || true
     n_bad=$(python3 -c 'import json,sys; print(len(json.loads(sys.argv[1])["incomplete"]))' "$c")
     n_tmp=$(python3 -c 'import json,sys; print(len(json.loads(sys.argv[1])["temporaries"]))' "$c")

@@ -3,7 +3,9 @@
 // the hull, write the main view's depth (EXR + preview PNG), the hull mesh (PLY + OBJ), the
 // surface point cloud (PLY + PCD) and, last, the frame's report line. Resumable: a frame whose
 // report exists for the same settings, with every output beside it, is skipped. Every file is
-// written atomically. Output layout: docs/formats.md ("Carve output").
+// written atomically. A frame's outputs depend on that frame (and the take's reference frames)
+// only, not on what the process carved before: a resumed or sharded run writes the bytes an
+// uninterrupted one does (scripts/killtest.sh). Output layout: docs/formats.md ("Carve output").
 #include <filesystem>
 #include <functional>
 #include <memory>

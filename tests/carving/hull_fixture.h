@@ -193,7 +193,7 @@ struct StudioFrame {
 // witness_cameras: the studio rig's witness count (synth::StudioRigOptions).
 inline StudioFrame makeStudioFrame(double time_s, int main_w, int main_h, bool undistorted = false,
                                    const Distortion* witness_lens = nullptr,
-                                   int witness_cameras = 8) {
+                                   int witness_cameras = 8, int fisheye_witnesses = 0) {
   StudioFrame f;
   f.time_s = time_s;
   const synth::StudioConfig config;
@@ -202,6 +202,7 @@ inline StudioFrame makeStudioFrame(double time_s, int main_w, int main_h, bool u
   rig_options.main_width = main_w;
   rig_options.main_height = main_h;
   rig_options.witness_cameras = witness_cameras;
+  rig_options.fisheye_witnesses = fisheye_witnesses;
   const Rig rig = synth::studioRig(rig_options, config.take_duration_s, true);
   for (const RigCamera& rc : rig.cameras) {
     RigCamera c = rc;

@@ -189,6 +189,8 @@ void LensTable::validate() const {
            entryField(i, "camera.height"));
     try {
       e.camera.validate();
+      // Interpolation, the Unreal and OpenTrackIO lens files carry k1 k2 k3 p1 p2.
+      requireBrownConrady(lens_name, e.camera.dist, "a lens table");
     } catch (const Error& err) {
       fail(err.message(), entryField(i, "camera." + err.context().field));
     }

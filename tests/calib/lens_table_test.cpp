@@ -214,6 +214,11 @@ TEST(LensTable, ValidateErrorsNameFieldAndEntry) {
   LensTable pupil = t;
   pupil.entries[1].entrance_pupil_m = std::nan("");
   EXPECT_EQ(errorField([&] { pupil.validate(); }), "entries[1].entrance_pupil_m");
+
+  // A fisheye entry: the table's files and interpolation carry Brown-Conrady terms only.
+  LensTable fisheye = t;
+  fisheye.entries[1].camera.dist = Distortion::kannalaBrandt(0.01, 0, 0, 0);
+  EXPECT_EQ(errorField([&] { fisheye.validate(); }), "entries[1].camera.distortion.model");
 }
 
 TEST(LensTable, OwnJsonRoundTripIsExact) {

@@ -30,6 +30,29 @@ expect_fail "missing folder names it" "nosuchdir" \
 expect_fail "unknown lock names it" "fix_k9" \
   "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/board.json" --out "$tmp/x.json" --lock fix_k9 --quiet
 
+expect_fail "unknown lens model names it" "mei.*--model|--model.*mei" \
+  "$bin" calib intrinsics --images "$tmp/blank" --board "$tmp/board.json" --out "$tmp/x.json" --model mei --quiet
+
+# A real fisheye (../shared/data/fisheye-chessboard, 6 x 4 inner corners) as Kannala-Brandt: the
+# camera JSON names the model, the OpenCV YAML is cv::fisheye's (equidistant, 4 coefficients).
+fisheye="$data/fisheye-chessboard"
+if ls "$fisheye"/*.jpg >/dev/null 2>&1; then
+  printf '{"type": "chessboard", "rows": 5, "cols": 7, "square_m": 1.0, "margin_m": 0.5}\n' > "$tmp/fisheye_board.json"
+  if "$bin" calib intrinsics --images "$fisheye" --board "$tmp/fisheye_board.json" --out "$tmp/fish/fish.json" \
+       --model fisheye --no-cross-validate --quiet 2>"$tmp/stderr_fish.txt"; then
+    grep -q '"model": *"kannala-brandt"' "$tmp/fish/fish.json" && ok "fisheye camera JSON names kannala-brandt" \
+      || fail "fisheye camera JSON: $(head -c 400 "$tmp/fish/fish.json")"
+    grep -q "distortion_model: equidistant" "$tmp/fish/fish.yaml" && ok "fisheye OpenCV YAML is equidistant" \
+      || fail "fisheye YAML: $(head -c 400 "$tmp/fish/fish.yaml")"
+    grep -q "lens model           kannala-brandt" "$tmp/stderr_fish.txt" && ok "report names the lens model" \
+      || fail "report lacks the lens model"
+  else
+    fail "calibrate the real fisheye: $(tail -5 "$tmp/stderr_fish.txt")"
+  fi
+else
+  fail "real fisheye data missing: $fisheye"
+fi
+
 real="$data/opencv-chessboard"
 if ls "$real"/left*.jpg >/dev/null 2>&1; then
   mkdir -p "$tmp/left"; cp "$real"/left*.jpg "$tmp/left/"

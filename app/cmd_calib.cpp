@@ -18,6 +18,7 @@
 #include "calib/report.h"
 #include "calib/selection.h"
 #include "calib/validation.h"
+#include "calib/pipeline.h"
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -107,7 +108,9 @@ class ImageSource {
 
 int runIntrinsics(const CalibArgs& a) {
   const BoardSpec board = readBoard(a.board);
-  calib::IntrinsicsOptions solve;
+  calib::PipelineOptions pipeline;
+  pipeline.board_source = a.board;
+  calib::IntrinsicsOptions& solve = pipeline.solve;
   solve.locks = calib::IntrinsicLocks::parse(a.lock);
   try {
     solve.model = lensModelFromString(a.model);
@@ -119,108 +122,31 @@ int runIntrinsics(const CalibArgs& a) {
   solve.loss = calib::robustLossFromString(a.loss);
   solve.loss_scale_px = a.loss_scale_px;
   solve.camera_name = a.camera_name.empty() ? fs::path(a.out).stem().string() : a.camera_name;
-  solve.validate();
-  calib::SelectionOptions selection;
-  selection.method = calib::selectionMethodFromString(a.select_method);
-  selection.views = std::max(1, a.select);
-  selection.locks = solve.locks;
-  selection.model = solve.model;
-  selection.validate();
+  pipeline.selection.method = calib::selectionMethodFromString(a.select_method);
+  pipeline.select = a.select;
+  pipeline.refine = a.refine;
+  pipeline.reject_soft = !a.keep_soft;
+  pipeline.cross_validate = !a.no_cross_validate;
+  pipeline.detect.linear_light = !a.not_srgb;
   if (a.refine < 0) {
     ErrorContext context;
     context.field = "--refine";
     throw Error("calib: --refine must be >= 0", context);
   }
+  pipeline.validate();
 
-  // 1. Detect the board in every image.
+  // Detect -> reject soft -> select -> solve -> refine -> uncertainty -> cross-validate
+  // (calib/pipeline.h), the images read in order from the folder or video.
   ImageSource source(a.images);
-  calib::DetectOptions detect;
-  detect.linear_light = !a.not_srgb;
-  std::vector<calib::ViewObservations> views(source.size());
+  calib::ImageSet images;
+  images.source = a.images;
+  images.count = source.size();
+  images.read = [&](int i) { return source.read(i); };
+  images.name = [&](int i) { return source.name(i); };
   ProgressLine progress("calib detect", source.size(), a.quiet);
-  for (int i = 0; i < source.size(); ++i) {
-    const cv::Mat image = source.read(i);
-    views[i] = calib::detectBoard(image, board, detect, source.name(i));
-    views[i].image_size = image.size();
-    progress.update(i + 1);
-  }
-  int found = 0;
-  for (const auto& v : views) found += v.found();
-  if (found == 0) {
-    ErrorContext context;
-    context.file = a.images;
-    throw Error("calib: the board " + a.board + " describes (" + toString(board.type) + ", " +
-                    std::to_string(board.rows) + " x " + std::to_string(board.cols) +
-                    ") was found in none of the " + std::to_string(views.size()) + " images",
-                context);
-  }
-  const int soft = a.keep_soft ? 0 : calib::rejectSoftViews(views);
-  for (const auto& v : views) {
-    if (!v.found()) std::cerr << "calib: no board in " << v.source << ": " << v.failure << "\n";
-    else if (v.rejected) std::cerr << "calib: not using " << v.source << ": " << v.rejected_reason << "\n";
-  }
-  std::cerr << "calib: board found in " << found << " of " << views.size() << " images" << (soft ? ", " + std::to_string(soft) + " too soft" : "") << "\n";
-
-  // 2. Choose views (streaming selector; linearised at a quick calibration of a spread of them).
-  calib::CalibReport report;
-  report.board = board;
-  std::vector<calib::ViewObservations> solve_views;
-  std::vector<int> solve_index;
-  int usable = 0;
-  for (const auto& v : views) usable += v.found() && !v.rejected;
-  if (a.select > 0 && usable > a.select) {
-    std::vector<calib::ViewObservations> spread;
-    for (int k = 0, taken = 0; k < static_cast<int>(views.size()); ++k) {
-      if (!views[k].found() || views[k].rejected) continue;
-      if ((taken++ * 20) % usable < 20) spread.push_back(views[k]);
-    }
-    try {
-      calib::IntrinsicsOptions quick = solve;
-      quick.compute_covariance = false;
-      selection.guess = calib::calibrateIntrinsics(spread, board, quick).camera;
-    } catch (const Error&) {
-      // the selector's nominal guess will do
-    }
-    calib::ViewSelector selector(board, views.front().image_size, selection);
-    for (const auto& v : views) selector.add(v);
-    solve_index = selector.selectedIndices();
-    report.selection_summary = selector.summary();
-    std::cerr << report.selection_summary << "\n";
-  } else {
-    for (int i = 0; i < static_cast<int>(views.size()); ++i) solve_index.push_back(i);
-  }
-  for (int i : solve_index) solve_views.push_back(views[i]);
-  if (a.select > 0) report.selected = solve_index;
-
-  // 3. Solve, 4. refine frontally, 5. say how sure we are.
-  report.result = calibrateIntrinsics(solve_views, board, solve);
-  if (a.refine > 0) {
-    calib::FrontalOptions frontal;
-    frontal.max_iterations = a.refine;
-    frontal.solve = solve;
-    frontal.detect.linear_light = detect.linear_light;
-    const calib::FrontalResult refined = calib::refineFrontal(
-        [&](size_t k) { return source.read(solve_index[k]); }, solve_views, board, report.result, frontal);
-    std::cerr << refined.report();
-    report.frontal = refined.iterations;
-    report.result = refined.result;
-    solve_views = refined.views;
-  }
-  calib::UncertaintyOptions uncertainty;
-  uncertainty.mode = report.result.joint_covariance.size() > 0 ? calib::UncertaintyMode::kMeanFrames
-                                                               : calib::UncertaintyMode::kIntrinsicsOnly;
-  if (report.result.covariance_ok) report.uncertainty = calib::projectionUncertainty(report.result, uncertainty);
-  if (!a.no_cross_validate) {
-    calib::CrossValidationOptions cross;
-    cross.solve = solve;
-    try {
-      report.cross_validation = calib::crossValidate(solve_views, board, cross);
-      std::cerr << report.cross_validation->report();
-    } catch (const Error& e) {
-      std::cerr << "calib: no cross-validation: " << e.what() << "\n";
-    }
-  }
-  report.views = views;
+  calib::PipelineResult run = calib::calibratePipeline(images, board, pipeline, [&](int done) { progress.update(done); });
+  for (const std::string& line : run.log) std::cerr << (line.back() == '\n' ? line : "calib: " + line + "\n");
+  calib::CalibReport& report = run.report;
 
   // 6. Write the camera (previz JSON + OpenCV YAML beside it) and the report.
   const fs::path out(a.out);

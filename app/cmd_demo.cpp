@@ -1,12 +1,15 @@
 // previz demo (README command 1): renders the built-in synthetic studio, calibrates every
-// camera's intrinsics from its own board take (intrinsics preset: detect, solve, calib report
-// pictures), calibrates the rig from a rig take (rig preset: board waved, then on the floor;
+// camera's intrinsics from its own board take (intrinsics preset) through the chain `previz calib
+// intrinsics` runs (calib/pipeline.h: detect, reject soft views, select, solve, uncertainty,
+// cross-validation; calib report pictures), calibrates the rig from a rig take (rig preset: board waved, then on the floor;
 // intrinsics held at the calibrated ones), runs the live frame (key -> carve -> main-view depth
 // -> track props -> composite, live/frame_loop.h) over the studio take with the calibrated rig (the main
 // camera's dolly motion from the take's tracker file, relative to where it stood during the rig
 // take) and, for comparison, with the take's true rig, and writes a report page (report.html):
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
 // depth previews, the front/behind layer and the stage timings. Layout: docs/formats.md.
+#include <omp.h>
+
 #include <filesystem>
 #include <iostream>
 #include <chrono>
@@ -25,6 +28,7 @@
 #include "app/progress.h"
 #include "calib/detect.h"
 #include "calib/intrinsics.h"
+#include "calib/pipeline.h"
 #include "calib/report.h"
 #include "calib/validation.h"
 #include "carving/take.h"
@@ -63,6 +67,7 @@ struct DemoArgs {
   int cams = 8;
   std::uint64_t seed = 1;
   int views = 12;        // intrinsics board views per camera
+  int select = 0;        // calibrate from the N most informative of them (0 = every usable view)
   int rig_frames = 48;   // rig take frames (the last few show the floor board)
   bool no_calibrate = false;
   bool json = false;
@@ -137,6 +142,20 @@ cv::Mat contactSheet(const fs::path& take, const Rig& rig, int frame) {
   return sheet;
 }
 
+std::string htmlEscape(const std::string& s) {
+  std::string o;
+  for (char ch : s) {
+    switch (ch) {
+      case '&': o += "&amp;"; break;
+      case '<': o += "&lt;"; break;
+      case '>': o += "&gt;"; break;
+      case '"': o += "&quot;"; break;
+      default: o += ch;
+    }
+  }
+  return o;
+}
+
 std::string stem(int frame) {
   char s[32];
   std::snprintf(s, sizeof(s), "%06d", frame);
@@ -148,7 +167,9 @@ struct CameraCalib {
   std::string camera;
   Camera truth;
   calib::IntrinsicsResult result;
-  int views = 0, found = 0;
+  int views = 0, found = 0, soft = 0;
+  std::vector<std::string> not_used;  // views the pipeline left out, with why
+  std::string selection;              // the selector's summary ("" = every usable view)
 };
 
 // The rig as the demo calibrated it, against the rig take's truth.
@@ -163,7 +184,7 @@ struct RigCalib {
 // Per camera of the studio rig: an intrinsics-preset take of its own (the board moved and tilted
 // in front of it), detected and solved; the report files go to out/calib/<camera>.*.
 std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, const Rig& truth, int views,
-                                          const fs::path& out, bool quiet) {
+                                          int select, const fs::path& out, bool quiet) {
   std::vector<CameraCalib> all;
   for (const RigCamera& rc : truth.cameras) {
     const std::string& name = rc.camera.name;
@@ -182,38 +203,33 @@ std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, con
       synth::synthesizeTake(o, take, [&](const synth::SynthProgress& p) { progress.update(p.frames_done); });
     }
     const BoardSpec board = readBoard(take / "board.json");
-    std::vector<calib::ViewObservations> obs(o.frames);
-    calib::DetectOptions detect;
-    std::vector<cv::Mat> images(o.frames);  // read here: nothing may throw inside the parallel loop
-    std::vector<std::string> sources(o.frames);
-    for (int f = 0; f < o.frames; ++f) {
-      const fs::path image_path = take / "cams" / name / (stem(f) + ".png");
-      images[f] = readImage(image_path, cv::IMREAD_COLOR);
-      sources[f] = image_path.string();
-    }
-#pragma omp parallel for schedule(dynamic)
-    for (int f = 0; f < o.frames; ++f) {
-      obs[f] = calib::detectBoard(images[f], board, detect, sources[f]);
-      obs[f].image_size = images[f].size();
-    }
+    // The shipped chain (calib/pipeline.h, as `previz calib intrinsics` runs it): detect ->
+    // reject soft views -> select (--select) -> solve -> uncertainty -> cross-validate.
+    calib::PipelineOptions pipeline;
+    pipeline.board_source = (take / "board.json").string();
+    pipeline.select = select;
+    pipeline.solve.camera_name = name;
+    pipeline.solve.threads = 2;
+    pipeline.threads = std::max(1, omp_get_max_threads());
+    calib::ImageSet images;
+    images.source = (take / "cams" / name).string();
+    images.count = o.frames;
+    images.name = [&](int f) { return (take / "cams" / name / (stem(f) + ".png")).string(); };
+    images.read = [&](int f) { return readImage(images.name(f), cv::IMREAD_COLOR); };
+    const calib::PipelineResult run = calib::calibratePipeline(images, board, pipeline);  // throws naming views
     CameraCalib c;
     c.camera = name;
     c.truth = rc.camera;
     c.views = o.frames;
-    for (const auto& v : obs) c.found += v.found();
-    calib::IntrinsicsOptions solve;
-    solve.camera_name = name;
-    solve.threads = 2;
-    c.result = calib::calibrateIntrinsics(obs, board, solve);  // throws naming the camera's views
-    calib::CalibReport report;
-    report.result = c.result;
-    report.board = board;
-    report.views = obs;
-    calib::UncertaintyOptions uncertainty;
-    uncertainty.mode = c.result.joint_covariance.size() > 0 ? calib::UncertaintyMode::kMeanFrames
-                                                            : calib::UncertaintyMode::kIntrinsicsOnly;
-    if (c.result.covariance_ok) report.uncertainty = calib::projectionUncertainty(c.result, uncertainty);
-    calib::writeCalibReport(report, out / "calib" / name);
+    c.found = run.found;
+    c.soft = run.soft;
+    c.result = run.report.result;
+    c.selection = run.report.selection_summary;
+    for (const calib::ViewObservations& v : run.report.views) {
+      if (!v.found()) c.not_used.push_back(fs::path(v.source).filename().string() + ": no board (" + v.failure + ")");
+      else if (v.rejected) c.not_used.push_back(fs::path(v.source).filename().string() + ": " + v.rejected_reason);
+    }
+    calib::writeCalibReport(run.report, out / "calib" / name);
     std::cerr << "demo: " << name << ": board in " << c.found << " of " << c.views << " views; "
               << c.result.briefReport() << "\n";
     all.push_back(std::move(c));
@@ -442,9 +458,11 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
 
   if (!cameras.empty()) {
     h << "<h2>Camera calibration (intrinsics)</h2><p>Each camera filmed its own board take "
-         "(calib_takes/&lt;camera&gt;, intrinsics preset: a chessboard moved and tilted in front of it); previz "
-         "detected the board and solved fx fy cx cy k1 k2 p1 p2 k3 (skew held). Value &plusmn; 1&sigma; "
-         "(error against the take's truth/rig.json).</p>\n<table><tr><th style=\"text-align:left\">camera</th>"
+         "(calib_takes/&lt;camera&gt;, intrinsics preset: a chessboard moved and tilted in front of it), "
+         "calibrated by the chain <code>previz calib intrinsics</code> runs (calib/pipeline.h: detect, reject soft "
+         "views, select, solve fx fy cx cy k1 k2 p1 p2 k3 with skew held, uncertainty, cross-validation). "
+         "Value &plusmn; 1&sigma; (error against the take's truth/rig.json); views: used / rendered, and the "
+         "views left out with why.</p>\n<table><tr><th style=\"text-align:left\">camera</th>"
          "<th>views</th><th>RMS px</th>";
     const int shown_params[] = {0, 1, 2, 3, 5, 6, 7, 8, 9};
     for (int k : shown_params) h << "<th>" << calib::kIntrinsicNames[k] << "</th>";
@@ -455,7 +473,10 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
       const double est[] = {e.fx, e.fy, e.cx, e.cy, e.skew, e.dist.k1, e.dist.k2, e.dist.p1, e.dist.p2, e.dist.k3};
       const double tru[] = {t.fx, t.fy, t.cx, t.cy, t.skew, t.dist.k1, t.dist.k2, t.dist.p1, t.dist.p2, t.dist.k3};
       h << "<tr><td style=\"text-align:left\"><a href=\"calib/" << c.camera << ".report.json\">" << c.camera
-        << "</a></td><td>" << c.result.views_used << "/" << c.views << "</td><td>" << num(c.result.rms_px, 3) << "</td>";
+        << "</a></td><td>" << c.result.views_used << "/" << c.views;
+      for (const std::string& why : c.not_used) h << "<br><small>" << htmlEscape(why) << "</small>";
+      if (!c.selection.empty()) h << "<br><small>" << htmlEscape(c.selection) << "</small>";
+      h << "</td><td>" << num(c.result.rms_px, 3) << "</td>";
       for (int k : shown_params) {
         const int d = k < 4 ? 2 : 5;
         h << "<td>" << num(est[k], d) << " &plusmn; " << num(c.result.sigma[k], d) << "<br><small>("
@@ -538,6 +559,9 @@ Runner addDemoCommand(CLI::App& app) {
   cmd->add_option("--size", a->size, "Witness size WxH (default 1280x720; main scales with it)");
   cmd->add_option("--seed", a->seed, "Random seed")->capture_default_str();
   cmd->add_option("--views", a->views, "Intrinsics board views rendered per camera")->capture_default_str();
+  cmd->add_option("--select", a->select,
+                  "Calibrate each camera from the N most informative of its views (0 = every usable view)")
+      ->capture_default_str();
   cmd->add_option("--rig-frames", a->rig_frames, "Frames of the rig take (the last few show the floor board)")
       ->capture_default_str();
   cmd->add_flag("--no-calibrate", a->no_calibrate, "Skip the calibration: run on the take's true rig only (quick look)");
@@ -590,7 +614,7 @@ Runner addDemoCommand(CLI::App& app) {
     if (!a->no_calibrate) {
       std::cerr << "demo: [1/4] calibrating " << rig.cameras.size() << " cameras' intrinsics, " << a->views
                 << " board views each, into " << out / "calib" << "\n";
-      cameras = calibrateCameras(o, rig, a->views, out, a->quiet);
+      cameras = calibrateCameras(o, rig, a->views, a->select, out, a->quiet);
       std::cerr << "demo: [2/4] calibrating the rig from a " << a->rig_frames << "-frame rig take\n";
       rig_calib = calibrateRigTake(o, cameras, a->rig_frames, out, a->quiet);
       writeTrackedMain(take, rig_calib->truth.at(rig.cameras.back().camera.name).T_world_cam,
@@ -626,6 +650,11 @@ Runner addDemoCommand(CLI::App& app) {
       for (const CameraCalib& c : cameras) {
         intrinsics.push_back({{"camera", c.camera},
                               {"views_used", c.result.views_used},
+                              {"views_rendered", c.views},
+                              {"views_with_board", c.found},
+                              {"views_soft", c.soft},
+                              {"views_not_used", c.not_used},
+                              {"selection", c.selection},
                               {"rms_px", c.result.rms_px},
                               {"fx_error_px", c.result.camera.fx - c.truth.fx},
                               {"cx_error_px", c.result.camera.cx - c.truth.cx},

@@ -38,6 +38,7 @@
 #include "core/io.h"
 #include "core/pose.h"
 #include "core/rig.h"
+#include "core/text.h"
 #include "datasets/synth.h"
 #include "multicam/observations.h"
 #include "multicam/rig_calib.h"
@@ -140,20 +141,6 @@ cv::Mat contactSheet(const fs::path& take, const Rig& rig, int frame) {
     tiles[i].copyTo(sheet(cv::Rect(c * tile.width, r * tile.height, tile.width, tile.height)));
   }
   return sheet;
-}
-
-std::string htmlEscape(const std::string& s) {
-  std::string o;
-  for (char ch : s) {
-    switch (ch) {
-      case '&': o += "&amp;"; break;
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += ch;
-    }
-  }
-  return o;
 }
 
 std::string stem(int frame) {

@@ -17,6 +17,7 @@
 #include "core/mesh.h"
 #include "core/pose_lines.h"
 #include "core/rig.h"
+#include "core/text.h"
 
 namespace previz::batch {
 namespace fs = std::filesystem;
@@ -24,20 +25,6 @@ namespace fs = std::filesystem;
 namespace {
 
 void copyAtomic(const fs::path& from, const fs::path& to) { writeFileAtomic(to, readTextFile(from)); }
-
-std::string htmlEscape(const std::string& s) {
-  std::string o;
-  for (char ch : s) {
-    switch (ch) {
-      case '&': o += "&amp;"; break;
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += ch;
-    }
-  }
-  return o;
-}
 
 std::string fixed(double v, int digits) {
   char text[64];

@@ -31,6 +31,7 @@
 #include "calib/pipeline.h"
 #include "calib/report.h"
 #include "calib/validation.h"
+#include "multicam/pipeline.h"
 #include "carving/take.h"
 #include "composite/measure.h"
 #include "composite/output.h"
@@ -42,6 +43,7 @@
 #include "datasets/synth.h"
 #include "multicam/observations.h"
 #include "multicam/rig_calib.h"
+#include "multicam/rig_io.h"
 #include "multicam/rig_picture.h"
 #include "tracking/props.h"
 #include "tracking/run.h"
@@ -166,6 +168,7 @@ struct RigCalib {
   int frames = 0;
   std::vector<int> floor_frames;
   double detect_s = 0;
+  multicam::SyncReport sync;
 };
 
 // Per camera of the studio rig: an intrinsics-preset take of its own (the board moved and tilted
@@ -271,11 +274,17 @@ RigCalib calibrateRigTake(const synth::SynthOptions& studio, const std::vector<C
       throw Error("demo: no calibrated intrinsics for " + rc.camera.name, context);
     }
   }
-  r.result = multicam::calibrateRig(obs, initial, multicam::RigCalibOptions{});
+  // Solve and sync check as `previz rig calibrate` runs them (multicam/pipeline.h).
+  const multicam::RigPipelineResult solved = multicam::solveRigTake(obs, initial);
+  r.result = solved.calib;
+  r.sync = solved.sync;
   writeRig(r.result.rig, out / "rig.json");
   multicam::writeRigPicture(r.result.rig, &floor, out / "rig");
   std::cerr << "demo: rig calibrated from " << frames << " frames (" << floor.frames.size()
-            << " floor): RMS " << r.result.rms_px << " px, world from floor " << r.result.world_from_floor << "\n";
+            << " floor): RMS " << r.result.rms_px << " px, world from floor " << r.result.world_from_floor
+            << "; frame sync " << (r.sync.ok ? "every checked camera in sync" : "A CAMERA IS OUT OF SYNC") << "\n";
+  for (const multicam::CameraSync& c : r.sync.cameras)
+    if (!c.in_sync) std::cerr << "demo: " << c.camera << " out of sync by " << c.offset_frames << " frames\n";
   return r;
 }
 
@@ -489,8 +498,12 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
          "through the volume, then " << rig->floor_frames.size() << " frames of it on the floor (the world frame). "
          "Detected in " << num(rig->detect_s, 1) << " s; solved with every camera's intrinsics held at the ones "
          "above: RMS " << num(r.rms_px, 3) << " px over " << r.residuals << " residuals (" << r.rejected
-      << " rejected), world from floor: " << (r.world_from_floor ? "yes" : "no") << ". Error against the rig "
-         "take's truth/rig.json.</p>\n<table><tr><th style=\"text-align:left\">camera</th><th>views</th>"
+      << " rejected), world from floor: " << (r.world_from_floor ? "yes" : "no") << "; frame sync (the check "
+         "<code>previz rig calibrate</code> runs): "
+      << (rig->sync.ok ? "every checked camera in sync" : "<b>a camera is out of sync</b>");
+    for (const multicam::CameraSync& c : rig->sync.cameras)
+      if (!c.in_sync) h << " (" << htmlEscape(c.camera) << ": " << c.offset_frames << " frames)";
+    h << ". Error against the rig take's truth/rig.json.</p>\n<table><tr><th style=\"text-align:left\">camera</th><th>views</th>"
          "<th>RMS px</th><th>position error mm</th><th>rotation error deg</th><th>&sigma; position mm</th>"
          "<th>&sigma; rotation deg</th></tr>\n";
     for (size_t i = 0; i < r.rig.cameras.size(); ++i) {
@@ -656,7 +669,10 @@ Runner addDemoCommand(CLI::App& app) {
                             {"position_error_m", translationDistance(rc.T_world_cam, T_true)},
                             {"rotation_error_deg", rotationDistance(rc.T_world_cam, T_true) * 180 / M_PI}});
       }
-      summary["rig"] = {{"rms_px", rig_calib->result.rms_px}, {"rig", (out / "rig.json").string()}, {"cameras", rig_cams}};
+      summary["rig"] = {{"rms_px", rig_calib->result.rms_px},
+                        {"rig", (out / "rig.json").string()},
+                        {"cameras", rig_cams},
+                        {"sync", multicam::syncToJson(rig_calib->sync)}};
     }
     writeJsonAtomic(out / "summary.json", summary);
     std::cerr << "demo: take in " << take << ", contact sheet " << sheet_path << " (frame " << frame << "); composite PSNR over the actor: "

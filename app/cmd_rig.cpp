@@ -24,6 +24,7 @@
 #include "multicam/rig_calib.h"
 #include "multicam/rig_io.h"
 #include "multicam/rig_picture.h"
+#include "multicam/pipeline.h"
 #include "multicam/sync.h"
 
 namespace previz::app {
@@ -431,10 +432,13 @@ int runCalibrate(const RigArgs& a) {
   for (std::string& e : estimate) {
     if (e == "all") e = "*";
   }
-  RigCalibOptions options;
+  RigPipelineOptions pipeline;
+  RigCalibOptions& options = pipeline.calib;
   options.estimate_intrinsics = estimate;
   options.threads = a.threads;
-  options.validate();
+  pipeline.sync.max_offset = a.max_offset;
+  pipeline.sync.threads = a.threads;
+  pipeline.validate();
   const std::vector<std::optional<RigCamera>> known = resolveIntrinsics(a, cameras, estimate);
   std::optional<Rig> compare;
   if (!a.compare.empty()) compare = readRig(a.compare);
@@ -446,13 +450,12 @@ int runCalibrate(const RigArgs& a) {
   printDetections(obs, detect_s, cached);
   const Rig initial = initialRig(cameras, known, obs, a.main_camera);
 
-  // Throws (naming the camera) on a camera the solve cannot place; nothing is written then.
-  const RigCalibResult result = calibrateRig(obs, initial, options);
+  // Solve, then the sync check (multicam/pipeline.h). Throws (naming the camera) on a camera the
+  // solve cannot place; nothing is written then.
+  const RigPipelineResult solved = solveRigTake(obs, initial, pipeline);
+  const RigCalibResult& result = solved.calib;
   printCalib(result);
-  SyncOptions sync_options;
-  sync_options.max_offset = a.max_offset;
-  sync_options.threads = a.threads;
-  const SyncReport sync = checkSync(obs, result.rig, sync_options);
+  const SyncReport& sync = solved.sync;
   printSync(sync);
 
   const fs::path out(a.out);

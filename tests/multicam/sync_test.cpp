@@ -3,6 +3,7 @@
 // the rig preset's board path plus pixel noise), and image-level detections from the capture
 // fixture.
 #include "multicam/sync.h"
+#include "multicam/pipeline.h"
 
 #include <gtest/gtest.h>
 
@@ -87,6 +88,28 @@ TEST(Sync, CameraDelayedTwoFramesIsNamedWithItsOffset) {
   // The right offset explains the relative pose far better than none.
   EXPECT_LT(late.spread_at_offset, 0.25 * late.spread_at_zero);
   EXPECT_TRUE(r.unchecked.empty());
+}
+
+// The rig chain as one call (multicam/pipeline.h, what `previz rig calibrate` and the demo run):
+// the solve from the intrinsics, then the sync check against the solved rig, a late camera named.
+TEST(Sync, RigPipelineSolvesThenNamesTheLateCamera) {
+  const Rig rig = studio();
+  const BoardSpec board = synth::rigBoard(BoardType::kAprilGrid);
+  Rig initial = rig;
+  for (RigCamera& rc : initial.cameras) rc.T_world_cam = Pose::Identity();  // intrinsics only
+  const RigPipelineResult in_sync = solveRigTake(simulate(rig, board, 150, {}, 0.3), initial);
+  EXPECT_TRUE(in_sync.sync.ok);
+  EXPECT_TRUE(in_sync.calib.world_from_floor);
+  for (const RigCamera& rc : in_sync.calib.rig.cameras)
+    EXPECT_LT((rc.T_world_cam.translation() - rig.at(rc.camera.name).T_world_cam.translation()).norm(), 0.005)
+        << rc.camera.name;
+  const RigPipelineResult late = solveRigTake(simulate(rig, board, 150, {{"witness03", 2}}, 0.3), initial);
+  EXPECT_FALSE(late.sync.ok);
+  EXPECT_EQ(find(late.sync, "witness03").offset_frames, 2);
+  EXPECT_FALSE(find(late.sync, "witness03").in_sync);
+  RigPipelineOptions bad;
+  bad.sync.max_offset = -1;
+  EXPECT_THROW(solveRigTake(simulate(rig, board, 20, {}, 0.3), initial, bad), Error);
 }
 
 TEST(Sync, CameraAheadOneFrameGetsNegativeOffset) {

@@ -94,6 +94,33 @@ TEST(Render, PixelRayEqualsUnprojectAndProjectsBackBelowNanoPixel) {
   EXPECT_LT(worst_px, 1e-9);
 }
 
+// The same through a studio fisheye witness (Kannala-Brandt, 160 degrees diagonal): the
+// renderer's Newton on lens_model.h's fisheye against Camera::unproject, corners included.
+TEST(Render, FisheyePixelRayEqualsUnprojectAndProjectsBack) {
+  const Camera camera = witnessCamera(2, 8, 3, 1280, 720, true).camera;
+  ASSERT_EQ(camera.dist.model, LensModel::kKannalaBrandt);
+  double worst_angle = 0, worst_px = 0, widest = 0;
+  for (int i = 0; i <= 40; ++i) {
+    for (int j = 0; j <= 24; ++j) {
+      const Eigen::Vector2d px(-0.5 + i * camera.width / 40.0, -0.5 + j * camera.height / 24.0);
+      Eigen::Vector3d ray;
+      ASSERT_TRUE(pixelRay(camera, px, ray)) << px.transpose();
+      const std::optional<Eigen::Vector3d> reference = camera.unproject(px);
+      ASSERT_TRUE(reference.has_value());
+      worst_angle = std::max(worst_angle, (ray - *reference).norm());
+      widest = std::max(widest, std::acos(reference->z()));
+      const std::optional<Eigen::Vector2d> back = camera.project(ray);
+      ASSERT_TRUE(back.has_value());
+      worst_px = std::max(worst_px, (*back - px).norm());
+    }
+  }
+  std::printf("fisheye pixelRay vs unproject: worst angle %.3g rad, reprojection %.3g px, corner ray %.1f deg off axis\n",
+              worst_angle, worst_px, widest * 180 / M_PI);
+  EXPECT_GE(2 * widest * 180 / M_PI, 150.0);
+  EXPECT_LT(worst_angle, 1e-12);
+  EXPECT_LT(worst_px, 1e-9);
+}
+
 // Renders intrinsics-preset frames of a chessboard without blur or noise, detects the corners
 // with OpenCV and compares them with Camera::project of the true corners. Checks the renderer,
 // the camera model and the pixel-centre convention together (a half-pixel slip alone gives

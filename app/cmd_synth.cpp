@@ -82,6 +82,9 @@ Runner addSynthCommand(CLI::App& app) {
   cmd->add_option("--out", args->out, "Take folder to write")->required();
   cmd->add_option("--frames", o.frames, "Number of frames")->capture_default_str();
   cmd->add_option("--cams", o.witness_cameras, "Number of witness cameras")->capture_default_str();
+  cmd->add_option("--fisheye-witnesses", o.fisheye_witnesses,
+                  "The first N witnesses get a fisheye lens (Kannala-Brandt, ~160 degrees diagonal)")
+      ->capture_default_str();
   cmd->add_option("--seed", o.seed, "Random seed (takes are reproducible bit for bit)")
       ->capture_default_str();
   cmd->add_option("--size", args->size,

@@ -93,6 +93,7 @@ nlohmann::json optionsToJson(const SynthOptions& o) {
   return {{"preset", toString(o.preset)},
           {"frames", o.frames},
           {"witness_cameras", o.witness_cameras},
+          {"fisheye_witnesses", o.fisheye_witnesses},
           {"seed", o.seed},
           {"witness_width", o.witness_width},
           {"witness_height", o.witness_height},
@@ -224,6 +225,10 @@ void SynthOptions::validate() const {
   if (witness_cameras < 1 || witness_cameras > 99) {
     badOption("witness_cameras", "must be in [1, 99] (got " + str(witness_cameras) + ")");
   }
+  if (fisheye_witnesses < 0 || fisheye_witnesses > witness_cameras) {
+    badOption("fisheye_witnesses",
+              "must be in [0, witness_cameras = " + str(witness_cameras) + "] (got " + str(fisheye_witnesses) + ")");
+  }
   if (witness_width <= 0) badOption("witness_width", "must be > 0 (got " + str(witness_width) + ")");
   if (witness_height <= 0) {
     badOption("witness_height", "must be > 0 (got " + str(witness_height) + ")");
@@ -342,6 +347,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
   // assume a static rig.
   StudioRigOptions rig_options;
   rig_options.witness_cameras = o.witness_cameras;
+  rig_options.fisheye_witnesses = o.fisheye_witnesses;
   rig_options.seed = o.seed;
   rig_options.witness_width = o.witness_width;
   rig_options.witness_height = o.witness_height;

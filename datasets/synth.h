@@ -24,6 +24,7 @@ struct SynthOptions {
   Preset preset = Preset::kStudio;
   int frames = 24;
   int witness_cameras = 8;
+  int fisheye_witnesses = 0;     // the first N witnesses have a fisheye lens (rigs.h witnessCamera)
   std::uint64_t seed = 1;
   int witness_width = 1280, witness_height = 720;  // --size WxH sets these
   int main_width = 1920, main_height = 1080;

@@ -67,12 +67,15 @@ struct StudioFixture {
   mutable std::vector<cv::Mat> stage;  // per camera: empty stage, no noise
   mutable std::once_flag stage_once;
 
-  explicit StudioFixture(std::filesystem::path stage_cache = {}, int width = 1280, int height = 720)
+  // fisheye_witnesses: the first N witnesses with a fisheye lens (datasets/rigs.h witnessCamera).
+  explicit StudioFixture(std::filesystem::path stage_cache = {}, int width = 1280, int height = 720,
+                         int fisheye_witnesses = 0)
       : cache_dir(std::move(stage_cache)) {
     synth::StudioRigOptions o;
     o.witness_width = width;
     o.witness_height = height;
     o.with_main = false;
+    o.fisheye_witnesses = fisheye_witnesses;
     rig = synth::studioRig(o, config.take_duration_s, true);
   }
 
@@ -86,7 +89,8 @@ struct StudioFixture {
         const RigCamera& rc = rig.cameras[static_cast<size_t>(c)];
         const std::filesystem::path file =
             cache_dir / (rc.camera.name + "_" + std::to_string(rc.camera.width) + "x" +
-                         std::to_string(rc.camera.height) + "_seed" + std::to_string(config.seed) + ".png");
+                         std::to_string(rc.camera.height) + "_seed" + std::to_string(config.seed) +
+                         (rc.camera.dist.isBrown() ? "" : "_kb") + ".png");
         if (!cache_dir.empty() && std::filesystem::exists(file)) {
           try {
             stage[static_cast<size_t>(c)] = readImage(file, cv::IMREAD_COLOR);

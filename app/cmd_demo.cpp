@@ -39,6 +39,7 @@
 #include "core/io.h"
 #include "core/pose.h"
 #include "core/rig.h"
+#include "core/stats.h"
 #include "core/text.h"
 #include "datasets/synth.h"
 #include "multicam/observations.h"
@@ -313,12 +314,6 @@ struct RunResult {
   std::vector<double> prop_err_mm, prop_err_deg;
 };
 
-double medianOf(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
 // Runs the live frame over the take with the rig at rig_path (tracked: the tracker's main poses,
 // empty = the take's true main poses) into 'out' and measures each composite against the truth.
 RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::path& tracked,
@@ -448,7 +443,7 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
   if (shown.prop_frames > 0) {
     h << "<h2>Tracked props</h2><p>The props stage (AprilTag-tagged crate, every camera, joint solve): tracked in "
       << shown.prop_tracked << " of " << shown.prop_frames << " prop-frames; median error against the take's "
-      << "truth/props.jsonl " << num(medianOf(shown.prop_err_mm), 2) << " mm, " << num(medianOf(shown.prop_err_deg), 3)
+      << "truth/props.jsonl " << num(median(shown.prop_err_mm), 2) << " mm, " << num(median(shown.prop_err_deg), 3)
       << "&deg; (poses: <a href=\"" << shown_dir << "/props.jsonl\">" << shown_dir << "/props.jsonl</a>).</p>\n";
   }
 
@@ -641,8 +636,8 @@ Runner addDemoCommand(CLI::App& app) {
       const RunResult& shown = calibrated ? *calibrated : truth;
       summary["props"] = {{"prop_frames", shown.prop_frames},
                           {"tracked", shown.prop_tracked},
-                          {"median_position_error_mm", medianOf(shown.prop_err_mm)},
-                          {"median_rotation_error_deg", medianOf(shown.prop_err_deg)}};
+                          {"median_position_error_mm", median(shown.prop_err_mm)},
+                          {"median_rotation_error_deg", median(shown.prop_err_deg)}};
     }
     if (calibrated) {
       summary["psnr_calibrated_rig"] = {{"min_db", calibrated->min_psnr_db}, {"mean_db", calibrated->mean_psnr_db}};

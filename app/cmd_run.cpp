@@ -36,6 +36,7 @@
 #include "core/leftovers.h"
 #include "core/mesh.h"
 #include "core/pose.h"
+#include "core/stats.h"
 #include "datasets/scene.h"
 #include "datasets/synth.h"
 #include "take/convert.h"
@@ -446,11 +447,6 @@ struct BenchArgs {
   LoopArgs loop;
   bool json = false;
 };
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
 
 // Start-up (issue 31): the shared objects this process mapped before any command ran, counted as
 // `ldd previz | wc -l` counts them (every one but the executable: the vDSO and the dynamic

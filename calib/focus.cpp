@@ -9,17 +9,11 @@
 #include "calib/detail/detect_common.h"
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/stats.h"
 
 namespace previz::calib {
 
 namespace {
-
-double quantile(std::vector<float> v, double q) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
 
 }  // namespace
 

@@ -13,6 +13,7 @@
 
 #include "calib/detail/projection.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace previz::calib {
 
@@ -225,13 +226,6 @@ std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, co
   ceres::Solve(so, &problem, &summary);
   if (!summary.IsSolutionUsable()) return std::nullopt;
   return pose;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
 }
 
 }  // namespace

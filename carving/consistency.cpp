@@ -13,16 +13,11 @@
 
 #include "carving/hull.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace previz::carving {
 
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 double iou(const cv::Mat& a, const cv::Mat& b) {
   cv::Mat both, any;

@@ -18,6 +18,7 @@
 #include "composite/output.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stats.h"
 #include "core/write_fault.h"
 #include "live/inputs.h"
 #include "take/take.h"
@@ -34,12 +35,6 @@ constexpr int kLateFrames = 2;  // camera_late: the witness shows the frame this
 double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
 // q-quantile by rank (q = 0.5: the upper median, as bench run reports it; 0.99: p99).
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
-}
-
 // CPU time of the process (every thread), ms.
 double cpuMs() {
   timespec t{};

@@ -21,6 +21,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stats.h"
 #include "take/timecode.h"
 
 namespace previz::live {
@@ -82,12 +83,6 @@ Pose interpolatePose(const Pose& a, const Pose& b, double s) {
   T.linear() = Eigen::Quaterniond(a.linear()).slerp(s, Eigen::Quaterniond(b.linear())).toRotationMatrix();
   T.translation() = (1 - s) * a.translation() + s * b.translation();
   return T;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "core/error.h"
+#include "core/stats.h"
 #include "multicam/detail/bundle.h"
 #include "multicam/detail/views.h"
 
@@ -49,13 +50,6 @@ std::string joinNames(const std::vector<std::string>& names) {
   std::string s;
   for (size_t i = 0; i < names.size(); ++i) s += (i ? ", '" : "'") + names[i] + "'";
   return s;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
 }
 
 // Free intrinsics per rig camera from options.estimate_intrinsics.

@@ -15,6 +15,7 @@
 #include "calib/detail/projection.h"
 #include "core/error.h"
 #include "core/lens_model.h"
+#include "core/stats.h"
 #include "multicam/detail/bundle.h"
 
 namespace previz::multicam::detail {
@@ -293,13 +294,6 @@ class ScaledHeldCameraCost final : public ceres::SizedCostFunction<2, kPoseSize,
 
 // The rig's scale enters the solve (free, or held at a value other than 1): every camera held.
 bool scaledRig(const BundleProblem& p) { return p.rig_scale_free || p.rig_scale != 1.0; }
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 // Parameter storage of one solve.
 struct Params {

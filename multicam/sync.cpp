@@ -10,16 +10,10 @@
 
 #include "calib/intrinsics.h"
 #include "core/error.h"
+#include "core/stats.h"
 
 namespace previz::multicam {
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 Eigen::Vector3d logRotation(const Eigen::Matrix3d& R) {
   const Eigen::AngleAxisd aa(R);

@@ -1,5 +1,6 @@
 // The world's scale against tags of known size (see scale.h).
 #include "tracking/scale.h"
+#include "core/stats.h"
 
 #include <algorithm>
 #include <cmath>
@@ -25,12 +26,6 @@ Eigen::Vector3d triangulate(const std::vector<Sighting>& s) {
   }
   const Eigen::Vector4d X = Eigen::JacobiSVD<Eigen::MatrixXd>(A, Eigen::ComputeFullV).matrixV().col(3);
   return X.head<3>() / X(3);
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
 }
 
 }  // namespace

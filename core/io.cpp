@@ -12,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -319,6 +320,71 @@ namespace {
 // first (magic, version, then per attribute: name\0 type\0 int32 size, value; an empty name
 // ends a header; multi-part files have several, ended by an empty one) and every size checked
 // against the file's length.
+//
+// The walk must step through the header exactly as Imf::Header::readFrom does, or the two part
+// ways and OpenEXR reads a size this walk never saw (fuzz/corpus/exr/oom-string-attribute.exr:
+// a channel list declaring 55 bytes, where OpenEXR reads its channels up to the empty name, 56
+// bytes, and so found a 2 GB string one byte on). OpenEXR reads a known type's value by the
+// type, not by the declared size: fixed-size types their own bytes, "chlist" up to its empty
+// name, "preview" 8 + 4 w h bytes (allocated first), "stringvector" length-prefixed strings.
+// So the declared size of a known type must equal what OpenEXR will read, and every length
+// inside a value must fit in it: a file OpenEXR wrote always passes.
+namespace exr_walk {
+
+std::int32_t int32At(const unsigned char* b) {
+  return static_cast<std::int32_t>(std::uint32_t{b[0]} | std::uint32_t{b[1]} << 8 | std::uint32_t{b[2]} << 16 |
+                                   std::uint32_t{b[3]} << 24);
+}
+
+// Bytes OpenEXR 3.1 reads for a fixed-size attribute type; -1 for the types read another way
+// (string, stringvector, floatvector, chlist, preview, idmanifest) and for unknown types
+// (OpaqueAttribute: the declared size).
+int fixedSize(const std::string& type) {
+  static const std::map<std::string, int> sizes = {
+      {"box2i", 16},          {"box2f", 16},   {"chromaticities", 32}, {"compression", 1}, {"deepImageState", 1},
+      {"double", 8},          {"envmap", 1},   {"float", 4},           {"int", 4},         {"keycode", 28},
+      {"lineOrder", 1},       {"m33f", 36},    {"m33d", 72},           {"m44f", 64},       {"m44d", 128},
+      {"rational", 8},        {"tiledesc", 9}, {"timecode", 8},        {"v2i", 8},         {"v2f", 8},
+      {"v2d", 16},            {"v3i", 12},     {"v3f", 12},            {"v3d", 24}};
+  const auto it = sizes.find(type);
+  return it == sizes.end() ? -1 : it->second;
+}
+
+// Why a value of a type OpenEXR reads by its content does not fill its declared size exactly;
+// empty when it does.
+std::string contentMismatch(const std::string& type, const std::string& value) {
+  const auto* b = reinterpret_cast<const unsigned char*>(value.data());
+  const std::size_t size = value.size();
+  if (type == "chlist") {  // per channel: name\0, then 16 bytes; an empty name ends the list
+    std::size_t at = 0;
+    for (;;) {
+      const std::size_t nul = value.find('\0', at);
+      if (nul == std::string::npos || nul - at > 255) return "a channel name without its end";
+      if (nul == at) return nul + 1 == size ? "" : "the channel list ends before its declared size";
+      at = nul + 1 + 16;
+      if (at > size) return "a channel cut short";
+    }
+  }
+  if (type == "preview") {  // unsigned width, height, then 4 bytes a pixel
+    if (size < 8) return "shorter than its width and height";
+    const std::uint64_t w = static_cast<std::uint32_t>(int32At(b)), h = static_cast<std::uint32_t>(int32At(b + 4));
+    return 8 + 4 * w * h == size ? "" : "its pixels are not its declared size";
+  }
+  if (type == "stringvector") {  // int32 length, then the bytes, up to the declared size
+    for (std::size_t at = 0; at < size;) {
+      if (size - at < 4) return "a string length cut short";
+      const std::int32_t n = int32At(b + at);
+      at += 4;
+      if (n < 0 || static_cast<std::size_t>(n) > size - at) return "a string longer than the attribute";
+      at += static_cast<std::size_t>(n);
+    }
+    return "";
+  }
+  return "";
+}
+
+}  // namespace exr_walk
+
 void checkExrHeaders(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   in.seekg(0, std::ios::end);
@@ -330,6 +396,7 @@ void checkExrHeaders(const fs::path& path) {
   if (start[0] != 0x76 || start[1] != 0x2f || start[2] != 0x31 || start[3] != 0x01)
     throw Error("not an EXR file (no magic number)", fileContext(path));
   const bool multipart = (start[5] & 0x10) != 0;  // version field bit 12
+  // OpenEXR reads a name of up to Name::MAX_LENGTH (255) characters and its end.
   const auto readName = [&](std::string& name) {
     name.clear();
     for (char c; in.get(c);) {
@@ -348,14 +415,26 @@ void checkExrHeaders(const fs::path& path) {
       unsigned char size_le[4];
       if (!readName(type) || !in.read(reinterpret_cast<char*>(size_le), 4))
         throw Error("EXR header cut short or malformed (attribute '" + name + "')", fileContext(path));
-      const std::int32_t size = static_cast<std::int32_t>(std::uint32_t{size_le[0]} | std::uint32_t{size_le[1]} << 8 |
-                                                          std::uint32_t{size_le[2]} << 16 |
-                                                          std::uint32_t{size_le[3]} << 24);
+      const std::int32_t size = exr_walk::int32At(size_le);
       if (size < 0 || static_cast<std::int64_t>(in.tellg()) + size > length)
         throw Error("EXR attribute '" + name + "' declares " + std::to_string(size) +
                         " bytes, more than the file holds",
                     fileContext(path));
-      in.seekg(size, std::ios::cur);
+      const int fixed = exr_walk::fixedSize(type);
+      if (fixed >= 0 && size != fixed)
+        throw Error("EXR attribute '" + name + "' of type " + type + " declares " + std::to_string(size) +
+                        " bytes where its type has " + std::to_string(fixed),
+                    fileContext(path));
+      if (type == "chlist" || type == "preview" || type == "stringvector") {
+        std::string value(static_cast<std::size_t>(size), '\0');
+        if (!in.read(value.data(), size))
+          throw Error("EXR header cut short (attribute '" + name + "')", fileContext(path));
+        const std::string why = exr_walk::contentMismatch(type, value);
+        if (!why.empty())
+          throw Error("EXR attribute '" + name + "' of type " + type + " is malformed: " + why, fileContext(path));
+      } else {
+        in.seekg(size, std::ios::cur);
+      }
     }
     if (!multipart || attributes == 0) return;
   }

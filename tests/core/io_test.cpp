@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 
 #include <gtest/gtest.h>
@@ -151,6 +152,58 @@ TEST(Io, ExrErrorsNameTheFile) {
   EXPECT_THROW(writeExr(dir / "w.exr", wrong), Error);
   ExrImage names{cv::Mat(4, 4, CV_32FC2, cv::Scalar(0)), {"R"}, {}};
   EXPECT_THROW(writeExr(dir / "n.exr", names), Error);
+}
+
+// OpenEXR reads a known attribute type by the type, not by its declared size (a channel list up
+// to its empty name, a preview's w x h pixels, a string vector's own lengths): a header whose
+// declared sizes disagree with that is refused before OpenEXR sees it, naming the attribute
+// (fuzz/corpus/exr/oom-string-attribute.exr: a channel list one byte short sent OpenEXR one
+// byte past the walk, onto a 2 GB string).
+TEST(Io, ExrHeaderWhoseSizesOpenExrWouldReadOtherwiseIsRefused) {
+  const fs::path dir = tmpDir("exr_header_walk");
+  ExrImage exr{cv::Mat(4, 6, CV_32FC3, cv::Scalar(0.25, 0.5, 0.75)), {"R", "G", "B"}, {{"previz:note", "x"}}};
+  writeExr(dir / "good.exr", exr);
+  ASSERT_NO_THROW(readExr(dir / "good.exr"));
+  std::ifstream in(dir / "good.exr", std::ios::binary);
+  const std::string good((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto expectRefused = [&](const std::string& bytes, const std::string& file, const std::string& says) {
+    writeFileAtomic(dir / file, bytes);
+    try {
+      readExr(dir / file);
+      ADD_FAILURE() << file << " was read";
+    } catch (const Error& e) {
+      EXPECT_NE(e.message().find(says), std::string::npos) << e.message();
+      EXPECT_EQ(e.context().file, (dir / file).string());
+    }
+  };
+  const auto le32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v & 0xff), static_cast<char>(v >> 8 & 0xff), static_cast<char>(v >> 16 & 0xff),
+                       static_cast<char>(v >> 24 & 0xff)};
+  };
+  // The channel list declaring one byte less than its channels take.
+  const std::size_t chlist = good.find(std::string("chlist\0", 7));
+  ASSERT_NE(chlist, std::string::npos);
+  std::string short_list = good;
+  short_list[chlist + 7] = static_cast<char>(static_cast<unsigned char>(short_list[chlist + 7]) - 1);
+  expectRefused(short_list, "short_chlist.exr", "'channels' of type chlist is malformed");
+  // A float declaring 5 bytes.
+  const std::size_t aspect = good.find(std::string("float\0", 6));
+  ASSERT_NE(aspect, std::string::npos);
+  std::string wide_float = good;
+  wide_float[aspect + 6] = 5;
+  expectRefused(wide_float, "wide_float.exr", "where its type has 4");
+  // Attributes put in front of the first one (the pixels after the header are never reached).
+  const std::size_t first = 8;
+  const auto withAttribute = [&](const std::string& name, const std::string& type, const std::string& value) {
+    return good.substr(0, first) + name + '\0' + type + '\0' + le32(static_cast<std::uint32_t>(value.size())) +
+           value + good.substr(first);
+  };
+  // A preview declaring 65535 x 65535 pixels (16 GiB) in 8 bytes.
+  expectRefused(withAttribute("preview", "preview", le32(65535) + le32(65535)), "preview.exr",
+                "its pixels are not its declared size");
+  // A string vector whose one string claims 2 GB.
+  expectRefused(withAttribute("names", "stringvector", le32(0x7fffffff) + "abc"), "strings.exr",
+                "a string longer than the attribute");
 }
 
 TEST(Io, DepthExrUsesChannelZAndKeepsInfinity) {

@@ -165,6 +165,7 @@ int runIntrinsics(const CalibArgs& a) {
     j["out"] = out.string();
     j["opencv_yaml"] = yaml.string();
     j["report"] = files.json.string();
+    j["unreadable"] = run.unreadable;
     std::cout << j.dump() << "\n";
   }
   return 0;

@@ -46,16 +46,27 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
     const int n = std::min(batch, images.count - first);
     for (int k = 0; k < n; ++k) {
       names[k] = images.name(first + k);
-      held[k] = images.read(first + k);
-      if (held[k].empty()) {
-        ErrorContext context;
-        context.file = names[k];
-        throw Error("calib: image could not be read", context);
+      // An image (or a video frame) that cannot be read is skipped and reported, as a long job
+      // does with a bad frame: its view says why, and the run goes on with the rest.
+      std::string why;
+      try {
+        held[k] = images.read(first + k);
+        if (held[k].empty()) why = "it could not be read";
+      } catch (const std::exception& e) {
+        held[k] = cv::Mat();
+        why = e.what();
+      }
+      if (!why.empty()) {
+        ViewObservations& v = views[first + k];
+        v.source = names[k];
+        v.failure = "unreadable (skipped): " + why;
+        out.unreadable.push_back(names[k]);
       }
     }
     std::vector<std::exception_ptr> errors(static_cast<size_t>(n));
 #pragma omp parallel for schedule(dynamic) num_threads(options.threads)
     for (int k = 0; k < n; ++k) {
+      if (held[k].empty()) continue;
       try {
         views[first + k] = detectBoard(held[k], board, options.detect, names[k]);
         views[first + k].image_size = held[k].size();
@@ -68,6 +79,13 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
     if (progress) progress(first + n);
   }
   for (const auto& v : views) out.found += v.found();
+  if (static_cast<int>(out.unreadable.size()) == images.count) {
+    ErrorContext context;
+    context.file = images.source;
+    throw Error("calib: none of the " + std::to_string(images.count) + " images could be read (the first: " +
+                    views.front().source + ": " + views.front().failure + ")",
+                context);
+  }
   if (out.found == 0) {
     ErrorContext context;
     context.file = images.source;
@@ -80,11 +98,12 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
   // 2. Reject soft views (focus measure).
   out.soft = options.reject_soft ? rejectSoftViews(views) : 0;
   for (const auto& v : views) {
-    if (!v.found()) out.log.push_back("no board in " + v.source + ": " + v.failure);
+    if (!v.found()) out.log.push_back((v.failure.rfind("unreadable", 0) == 0 ? "" : "no board in ") + v.source + ": " + v.failure);
     else if (v.rejected) out.log.push_back("not using " + v.source + ": " + v.rejected_reason);
   }
   out.log.push_back("board found in " + std::to_string(out.found) + " of " + std::to_string(views.size()) +
-                    " images" + (out.soft ? ", " + std::to_string(out.soft) + " too soft" : ""));
+                    " images" + (out.soft ? ", " + std::to_string(out.soft) + " too soft" : "") +
+                    (out.unreadable.empty() ? "" : ", " + std::to_string(out.unreadable.size()) + " unreadable"));
 
   // 3. Choose views: a streaming selector linearised at a quick calibration of a spread of them.
   SelectionOptions selection = options.selection;

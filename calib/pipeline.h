@@ -34,8 +34,9 @@ struct PipelineOptions {
   void validate() const;        // throws Error naming the field
 };
 
-// The images: how many, the i-th (8-bit grey or BGR; an empty Mat or an exception = unreadable,
-// which is an error naming the image) and its name for messages. Read in order, from one thread.
+// The images: how many, the i-th (8-bit grey or BGR; an empty Mat or an exception = unreadable:
+// skipped, its view's failure says why, and PipelineResult::unreadable names it) and its name for
+// messages. Read in order, from one thread.
 struct ImageSet {
   std::string source;  // the folder or video, for messages
   int count = 0;
@@ -47,11 +48,13 @@ struct PipelineResult {
   CalibReport report;
   int found = 0;                    // images where the board was found
   int soft = 0;                     // of those, rejected as soft
+  std::vector<std::string> unreadable;  // images (video frames) that could not be read, skipped
   std::vector<std::string> log;     // what each step decided, one line each (no board in X, ...)
 };
 
-// progress(images detected so far). Throws Error when the board is found in no image (naming
-// the board and the image count) or the solve cannot run (naming the views).
+// progress(images detected so far). Throws Error when no image can be read or the board is found
+// in none (naming the source, the board and the image count) or the solve cannot run (naming the
+// views).
 PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board, const PipelineOptions& options,
                                  const std::function<void(int)>& progress = {});
 

@@ -57,8 +57,18 @@ real="$data/opencv-chessboard"
 if ls "$real"/left*.jpg >/dev/null 2>&1; then
   mkdir -p "$tmp/left"; cp "$real"/left*.jpg "$tmp/left/"
   printf 'this is not a jpeg' > "$tmp/left/left99.jpg"
-  expect_fail "unreadable image names the file" "left99.jpg" \
-    "$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/x.json" --quiet
+  # An unreadable image is skipped and named (stderr, --json's "unreadable"); the rest calibrate.
+  if "$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/skip/left.json" --quiet \
+       --json > "$tmp/skip.json" 2> "$tmp/skip.err" \
+     && grep -q "left99.jpg: unreadable (skipped)" "$tmp/skip.err" \
+     && python3 -c 'import json,sys; j=json.load(open(sys.argv[1])); sys.exit(0 if j["unreadable"]==["left99.jpg"] else 1)' "$tmp/skip.json"; then
+    ok "unreadable image skipped and named"
+  else
+    fail "unreadable image skipped and named: $(cat "$tmp/skip.err")"
+  fi
+  mkdir -p "$tmp/junk"; printf 'x' > "$tmp/junk/a.png"; printf 'y' > "$tmp/junk/b.png"
+  expect_fail "no readable image names the folder" "junk.*none of the 2 images could be read" \
+    "$bin" calib intrinsics --images "$tmp/junk" --board "$tmp/board.json" --out "$tmp/x.json" --quiet
   rm "$tmp/left/left99.jpg"; blank "$tmp/left/zz_blank.pgm"
   if out=$("$bin" calib intrinsics --images "$tmp/left" --board "$tmp/board.json" --out "$tmp/cam/left.json" \
            --lock fix_k3 --json --quiet 2>"$tmp/stderr.txt"); then

@@ -1,6 +1,6 @@
 // The calibration chain as one library call (calib/pipeline.h, issue 34), on the thesis Table
 // 5.1 renders (the cached set the other tests use): every step's decision in the report, the
-// result against the truth, and an unreadable image named.
+// result against the truth, unreadable images skipped and reported.
 #include "calib/pipeline.h"
 
 #include <cmath>
@@ -63,16 +63,53 @@ TEST(CalibPipeline, SelectsSolvesRefinesAndCrossValidatesWithEveryDecisionReport
               r.views.size(), r.result.camera.fx - truth.fx, r.result.sigma[0], r.result.rms_px);
 }
 
-TEST(CalibPipeline, UnreadableImageAndBoardNowhereAreNamed) {
+// Unreadable images (a corrupt file, an undecodable video frame) are skipped and reported, as a
+// long job does with bad frames: the calibration from the rest is as good as without them.
+TEST(CalibPipeline, UnreadableImagesAreSkippedAndReported) {
   const testing::RenderedSet& set = testing::table51Set(BoardType::kChessboard);
+  const Camera truth = testing::thesisCamera();
   ImageSet images = imagesOf(set);
-  images.read = [](int) { return cv::Mat(); };
+  const auto readable = images.read;
+  images.read = [&](int i) -> cv::Mat {
+    if (i == 2) return cv::Mat();  // a reader that gives nothing
+    if (i == 7) {
+      ErrorContext context;
+      context.file = "take.mov";
+      context.frame = 7;
+      throw Error("frame 7 does not decode", context);
+    }
+    return readable(i);
+  };
+  PipelineOptions options;
+  options.cross_validate = false;
+  const PipelineResult run = calibratePipeline(images, set.board, options);
+  EXPECT_EQ(run.unreadable, (std::vector<std::string>{"frame 2", "frame 7"}));
+  EXPECT_EQ(run.found, 18);
+  ASSERT_EQ(run.report.views.size(), 20u);
+  EXPECT_NE(run.report.views[2].failure.find("unreadable"), std::string::npos) << run.report.views[2].failure;
+  EXPECT_NE(run.report.views[7].failure.find("does not decode"), std::string::npos) << run.report.views[7].failure;
+  int logged = 0;
+  for (const std::string& line : run.log) logged += line.find("unreadable") != std::string::npos;
+  EXPECT_EQ(logged, 3);  // each image, and the count in the summary line
+  const IntrinsicsResult& r = run.report.result;
+  EXPECT_EQ(r.views_used, 18);
+  EXPECT_NEAR(r.camera.fx, truth.fx, 3 * r.sigma[0]);
+  EXPECT_NEAR(r.camera.cy, truth.cy, 3 * r.sigma[3]);
+
+  // Not one image readable: an error naming the source and the first image's reason.
+  images.read = [](int) -> cv::Mat { return cv::Mat(); };
   try {
     calibratePipeline(images, set.board, {});
-    FAIL() << "an unreadable image was accepted";
+    FAIL() << "a set of unreadable images was accepted";
   } catch (const Error& e) {
-    EXPECT_EQ(e.context().file, "frame 0");
+    EXPECT_EQ(e.context().file, "table 5.1 renders");
+    EXPECT_NE(std::string(e.what()).find("none of the 20 images could be read"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("frame 0"), std::string::npos) << e.what();
   }
+}
+
+TEST(CalibPipeline, BoardNowhereAndBadOptionsAreNamed) {
+  const testing::RenderedSet& set = testing::table51Set(BoardType::kChessboard);
   ImageSet grey = imagesOf(set);
   grey.count = 3;
   grey.read = [&](int) { return cv::Mat(set.images.front().size(), CV_8UC3, cv::Scalar(90, 90, 90)); };

@@ -331,6 +331,7 @@ nlohmann::json reportToJson(const CalibReport& report) {
     j["uncertainty"] = {{"mode", toString(m.mode)}, {"mean_px", m.mean_px}, {"max_px", m.max_px},
                         {"centre_px", m.centre_px}, {"corners_px", m.corners_px},
                         {"grid", {m.grid.cols, m.grid.rows}}};
+    if (m.grid.data_radius_px > 0) j["uncertainty"]["data_radius_px"] = m.grid.data_radius_px;
   }
   if (report.cross_validation) {
     const CrossValidationResult& c = *report.cross_validation;
@@ -341,6 +342,7 @@ nlohmann::json reportToJson(const CalibReport& report) {
                              {"consistent", c.consistent},
                              {"half_a", cameraToJson(c.a.camera)},
                              {"half_b", cameraToJson(c.b.camera)}};
+    if (c.grid.data_radius_px > 0) j["cross_validation"]["data_radius_px"] = c.grid.data_radius_px;
   }
   return j;
 }

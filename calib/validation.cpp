@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <initializer_list>
 #include <limits>
 #include <sstream>
 
@@ -34,6 +35,16 @@ ImageGrid makeGrid(cv::Size size, int cols) {
   return g;
 }
 
+// The furthest used point from the camera's principal point over the results' residuals, for a
+// lens that is not Brown–Conrady (ImageGrid::data_radius_px); 0 (the whole image) otherwise.
+void limitToData(ImageGrid& g, const Camera& camera, std::initializer_list<const IntrinsicsResult*> results) {
+  if (camera.dist.isBrown()) return;
+  g.principal_point = Eigen::Vector2d(camera.cx, camera.cy);
+  for (const IntrinsicsResult* r : results)
+    for (const PointResidual& p : r->residuals)
+      if (!p.rejected) g.data_radius_px = std::max(g.data_radius_px, (p.px - g.principal_point).norm());
+}
+
 double worstSigma(const Eigen::Matrix2d& C) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(0.5 * (C + C.transpose()));
   return std::sqrt(std::max(0.0, eig.eigenvalues()(1)));
@@ -56,14 +67,16 @@ void projectWithJacobians(const double* intr, LensModel model, const Eigen::Vect
 }
 
 // Projection difference of camera b against camera a over grid pixels: project_b(R ray_a(q)) - q,
-// with R the best-fit rotation when fit_rotation. Entries of `valid` false where a has no ray.
+// with R the best-fit rotation when fit_rotation (over the pixels inside). Entries of `valid`
+// false where a has no ray or the pixel is not inside.
 struct DiffField {
   std::vector<Eigen::Vector2d> d;
   std::vector<bool> valid;
 };
 
 DiffField projectionDiff(const double* intr_a, const double* intr_b, const Camera& size_ref,
-                         const std::vector<Eigen::Vector2d>& pixels, bool fit_rotation) {
+                         const std::vector<Eigen::Vector2d>& pixels, const std::vector<bool>& inside,
+                         bool fit_rotation) {
   Camera a = size_ref, b = size_ref;
   detail::vectorToCamera(intr_a, size_ref.dist.model, a);
   detail::vectorToCamera(intr_b, size_ref.dist.model, b);
@@ -72,6 +85,7 @@ DiffField projectionDiff(const double* intr_a, const double* intr_b, const Camer
   out.valid.assign(pixels.size(), false);
   std::vector<Eigen::Vector3d> rays(pixels.size());
   for (size_t k = 0; k < pixels.size(); ++k) {
+    if (!inside[k]) continue;
     const auto ray = a.unproject(pixels[k]);
     if (!ray) continue;
     rays[k] = *ray;
@@ -156,6 +170,7 @@ UncertaintyMap projectionUncertainty(const IntrinsicsResult& result,
   UncertaintyMap map;
   map.mode = options.mode;
   map.grid = makeGrid(result.image_size, options.grid_cols);
+  limitToData(map.grid, result.camera, {&result});
   map.sigma_px = cv::Mat(map.grid.rows, map.grid.cols, CV_64F, cv::Scalar(kNaN));
   const Camera& camera = result.camera;
   double intr[kIntrinsicCount];
@@ -173,6 +188,7 @@ UncertaintyMap projectionUncertainty(const IntrinsicsResult& result,
 #pragma omp parallel for schedule(static)
   for (int r = 0; r < map.grid.rows; ++r) {
     for (int c = 0; c < map.grid.cols; ++c) {
+      if (!map.grid.inside(r, c)) continue;
       const auto ray = camera.unproject(map.grid.pixel(r, c));
       if (!ray) continue;
       Eigen::Matrix<double, 2, kIntrinsicCount> J_intr;
@@ -267,15 +283,20 @@ CrossValidationResult crossValidate(const std::vector<ViewObservations>& views,
                 out.b.covariance_message + ")");
   }
   out.grid = makeGrid(out.a.image_size, options.grid_cols);
+  limitToData(out.grid, out.a.camera, {&out.a, &out.b});
   std::vector<Eigen::Vector2d> pixels;
+  std::vector<bool> inside;
   for (int r = 0; r < out.grid.rows; ++r)
-    for (int c = 0; c < out.grid.cols; ++c) pixels.push_back(out.grid.pixel(r, c));
+    for (int c = 0; c < out.grid.cols; ++c) {
+      pixels.push_back(out.grid.pixel(r, c));
+      inside.push_back(out.grid.inside(r, c));
+    }
   const size_t n = pixels.size();
 
   double ta[kIntrinsicCount], tb[kIntrinsicCount];
   detail::cameraToVector(out.a.camera, ta);
   detail::cameraToVector(out.b.camera, tb);
-  const DiffField diff = projectionDiff(ta, tb, out.a.camera, pixels, options.fit_rotation);
+  const DiffField diff = projectionDiff(ta, tb, out.a.camera, pixels, inside, options.fit_rotation);
 
   // Predicted covariance of the difference: J_a Sigma_a J_a^T + J_b Sigma_b J_b^T, the
   // Jacobians by central differences of the whole difference (rotation fit included).
@@ -294,8 +315,8 @@ CrossValidationResult crossValidate(const std::vector<ViewObservations>& views,
       std::copy(tb, tb + kIntrinsicCount, minus_b);
       (side == 0 ? plus_a : plus_b)[k] += step;
       (side == 0 ? minus_a : minus_b)[k] -= step;
-      const DiffField dp = projectionDiff(plus_a, plus_b, out.a.camera, pixels, options.fit_rotation);
-      const DiffField dm = projectionDiff(minus_a, minus_b, out.a.camera, pixels, options.fit_rotation);
+      const DiffField dp = projectionDiff(plus_a, plus_b, out.a.camera, pixels, inside, options.fit_rotation);
+      const DiffField dm = projectionDiff(minus_a, minus_b, out.a.camera, pixels, inside, options.fit_rotation);
       for (size_t q = 0; q < n; ++q) {
         if (dp.valid[q] && dm.valid[q]) J[q].col(k) = (dp.d[q] - dm.d[q]) / (2 * step);
       }
@@ -352,6 +373,11 @@ std::string CrossValidationResult::report() const {
                 "  projection difference: RMS %.4f px, max %.4f px; predicted RMS %.4f px\n",
                 diff_rms_px, diff_max_px, predicted_rms_px);
   s << line;
+  if (grid.data_radius_px > 0) {
+    std::snprintf(line, sizeof(line), "  compared within %.0f px of the principal point (where the board was seen)\n",
+                  grid.data_radius_px);
+    s << line;
+  }
   std::snprintf(line, sizeof(line),
                 "  normalised RMS %.3f (1 = as predicted), %.1f %% of the grid beyond 3 sigma: %s\n",
                 normalised_rms, 100.0 * fraction_beyond_3sigma,

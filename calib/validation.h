@@ -44,8 +44,17 @@ struct UncertaintyOptions {
 struct ImageGrid {
   int rows = 0, cols = 0;
   cv::Size image_size;
+  // A fisheye's grid stops where the board was seen: within data_radius_px of the principal
+  // point (the furthest used point; past it lies the dark rim outside the image circle, where
+  // the model only extrapolates and its predicted uncertainty grows without bound). 0: the whole
+  // image (Brown–Conrady lenses, whose sensor is lit to the corners).
+  double data_radius_px = 0;
+  Eigen::Vector2d principal_point = Eigen::Vector2d::Zero();
   Eigen::Vector2d pixel(int r, int c) const {
     return {(c + 0.5) * image_size.width / cols - 0.5, (r + 0.5) * image_size.height / rows - 0.5};
+  }
+  bool inside(int r, int c) const {
+    return data_radius_px <= 0 || (pixel(r, c) - principal_point).norm() <= data_radius_px;
   }
 };
 

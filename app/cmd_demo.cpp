@@ -248,35 +248,37 @@ RigCalib calibrateRigTake(const synth::SynthOptions& studio, const std::vector<C
   RigCalib r;
   r.frames = frames;
   r.truth = readRig(take / "truth" / "rig.json");
-  const BoardSpec board = readBoard(take / "board.json");
   const multicam::FloorSpec floor = multicam::readFloor(take / "floor.json");
   r.floor_frames = floor.frames;
-  const std::vector<std::string> names = multicam::takeCameras(take);
-  const auto start = std::chrono::steady_clock::now();
-  multicam::RigObservations obs;
-  {
-    ProgressLine progress("demo rig detect", static_cast<int>(names.size()) * frames, quiet);
-    obs = multicam::detectTake(take, names, board, &floor, multicam::DetectTakeOptions{},
-                               [&](const multicam::DetectProgress& p) { progress.update(p.images_done); });
-  }
-  r.detect_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  Rig initial = r.truth;  // names and roles; poses are ignored, intrinsics replaced below
-  for (RigCamera& rc : initial.cameras) {
-    rc.T_world_cam = Pose::Identity();
-    bool calibrated = false;
-    for (const CameraCalib& c : cameras) {
-      if (c.camera != rc.camera.name) continue;
-      rc.camera = c.result.camera;
-      calibrated = true;
-    }
-    if (!calibrated) {
+  // Detect -> initial rig -> solve -> sync check, as `previz rig calibrate` runs them
+  // (multicam/pipeline.h), every camera's intrinsics those calibrated above.
+  multicam::RigTake rig_take;
+  rig_take.take = take;
+  rig_take.cameras = multicam::takeCameras(take);
+  rig_take.board = readBoard(take / "board.json");
+  rig_take.floor = floor;
+  for (const std::string& name : rig_take.cameras) {
+    const RigCamera* truth = r.truth.find(name);
+    const CameraCalib* calibrated = nullptr;
+    for (const CameraCalib& c : cameras)
+      if (c.camera == name) calibrated = &c;
+    if (!truth || !calibrated) {
       ErrorContext context;
-      context.camera = rc.camera.name;
-      throw Error("demo: no calibrated intrinsics for " + rc.camera.name, context);
+      context.camera = name;
+      throw Error("demo: no calibrated intrinsics for " + name, context);
     }
+    RigCamera known;
+    known.camera = calibrated->result.camera;
+    known.role = truth->role;  // the truth's names and roles; its poses are not used
+    rig_take.known.push_back(known);
   }
-  // Solve and sync check as `previz rig calibrate` runs them (multicam/pipeline.h).
-  const multicam::RigPipelineResult solved = multicam::solveRigTake(obs, initial);
+  std::unique_ptr<ProgressLine> progress;
+  const multicam::RigPipelineResult solved =
+      multicam::calibrateRigTake(rig_take, {}, [&](const multicam::DetectProgress& p) {
+        if (!progress) progress = std::make_unique<ProgressLine>("demo rig detect", p.images_total, quiet);
+        progress->update(p.images_done);
+      });
+  r.detect_s = solved.detect_s;
   r.result = solved.calib;
   r.sync = solved.sync;
   writeRig(r.result.rig, out / "rig.json");

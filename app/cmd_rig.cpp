@@ -87,73 +87,33 @@ void requireTake(const RigArgs& a) {
   }
 }
 
-// What identifies a detection run: a cached observations file is reused only when all of it
-// matches (take, cameras, boards, frames on disk and their times, detector settings).
-nlohmann::json cacheKey(const RigArgs& a, const std::vector<std::string>& cameras, const BoardSpec& board,
-                        const FloorSpec* floor, const calib::DetectOptions& detect) {
-  nlohmann::json files = nlohmann::json::object();
-  for (const std::string& name : cameras) {
-    const fs::path dir = fs::path(a.take) / "cams" / name;
-    long long count = 0, newest = 0;
-    if (fs::is_directory(dir)) {
-      for (const auto& entry : fs::directory_iterator(dir)) {
-        ++count;
-        newest = std::max<long long>(newest, entry.last_write_time().time_since_epoch().count());
-      }
-    }
-    files[name] = {count, newest};
-  }
-  nlohmann::json floor_json;
-  if (floor) floor_json = {{"board", boardToJson(floor->board)}, {"frames", floor->frames}};
-  return {{"take", fs::weakly_canonical(a.take).string()},
-          {"cameras", cameras},
-          {"board", boardToJson(board)},
-          {"floor", floor_json},
-          {"files", files},
-          {"linear_light", detect.linear_light}};
+// How `previz rig` detects boards (the same for calibrate, check and resurvey).
+DetectTakeOptions detectOptions(const RigArgs& a) {
+  DetectTakeOptions options;
+  options.detect.linear_light = !a.not_srgb;
+  options.detect.measure_focus = false;
+  options.threads = a.threads;
+  return options;
 }
 
-// Detects the boards in the take (or reads them from the --observations cache), with a progress
-// line, and says what was found.
+// The board detections of the take (multicam/pipeline.h detectRigTake: the --observations cache
+// when it holds this take, else detected with a progress line), and what was found.
 RigObservations observe(const RigArgs& a, const std::vector<std::string>& cameras, const BoardSpec& board,
-                        const FloorSpec* floor, double* detect_s, bool* cached) {
-  calib::DetectOptions detect;
-  detect.linear_light = !a.not_srgb;
-  detect.measure_focus = false;
-  const nlohmann::json key = cacheKey(a, cameras, board, floor, detect);
-  *cached = false;
-  *detect_s = 0;
-  if (!a.observations.empty() && fs::exists(a.observations)) {
-    try {
-      const nlohmann::json j = readJsonFile(a.observations);
-      if (j.is_object() && j.contains("cache_key") && j.at("cache_key") == key) {
-        RigObservations obs = observationsFromJson(j, a.observations);
-        *cached = true;
-        std::cerr << "rig: board detections from " << a.observations << " (take unchanged)\n";
-        return obs;
-      }
-      std::cerr << "rig: " << a.observations << " is for another take or settings; detecting again\n";
-    } catch (const Error& e) {
-      // A cache is never worth failing for: it is rewritten below.
-      std::cerr << "rig: cannot use " << a.observations << " (" << e.what() << "); detecting again\n";
-    }
-  }
-  DetectTakeOptions options;
-  options.detect = detect;
-  options.threads = a.threads;
-  const auto start = std::chrono::steady_clock::now();
+                        const std::optional<FloorSpec>& floor, double* detect_s, bool* cached) {
+  RigTake take;
+  take.take = a.take;
+  take.cameras = cameras;
+  take.board = board;
+  take.floor = floor;
   std::unique_ptr<ProgressLine> progress;
-  RigObservations obs = detectTake(a.take, cameras, board, floor, options, [&](const DetectProgress& p) {
+  TakeDetections d = detectRigTake(take, detectOptions(a), a.observations, [&](const DetectProgress& p) {
     if (!progress) progress = std::make_unique<ProgressLine>("rig detect", p.images_total, a.quiet);
     progress->update(p.images_done);
   });
-  *detect_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (!a.observations.empty()) {
-    nlohmann::json j = observationsToJson(obs);
-    j["cache_key"] = key;
-    writeJsonAtomic(a.observations, j, -1);
-  }
-  return obs;
+  for (const std::string& line : d.log) std::cerr << "rig: " << line << "\n";
+  *detect_s = d.detect_s;
+  *cached = d.cached;
+  return std::move(d.observations);
 }
 
 nlohmann::json detectSummary(const RigObservations& obs, double detect_s, bool cached) {
@@ -276,57 +236,6 @@ std::vector<std::optional<RigCamera>> resolveIntrinsics(const RigArgs& a, const 
   return out;
 }
 
-// The initial rig: known intrinsics (scaled when a lens table's image size differs from the
-// take's), a nominal pinhole (fx = image width, ~53 degrees across) for estimated cameras.
-Rig initialRig(const std::vector<std::string>& cameras, const std::vector<std::optional<RigCamera>>& known,
-               const RigObservations& obs, const std::string& main_camera) {
-  Rig rig;
-  for (size_t i = 0; i < cameras.size(); ++i) {
-    const CameraDetections* d = obs.find(cameras[i]);
-    const cv::Size size = d ? d->image_size : cv::Size();
-    RigCamera rc;
-    if (known[i]) {
-      rc = *known[i];
-      if (!size.empty() && (size.width != rc.camera.width || size.height != rc.camera.height)) {
-        const double sx = static_cast<double>(size.width) / rc.camera.width;
-        const double sy = static_cast<double>(size.height) / rc.camera.height;
-        if (rc.role == "main" && std::abs(sx - sy) < 1e-9) {
-          std::cerr << "rig: " << cameras[i] << ": lens table at " << rc.camera.width << "x" << rc.camera.height
-                    << ", take at " << size.width << "x" << size.height << ": intrinsics scaled\n";
-          const std::string name = rc.camera.name;
-          rc.camera = rc.camera.scaled(sx, sy);
-          rc.camera.name = name;
-        } else {
-          ErrorContext context;
-          context.camera = cameras[i];
-          throw Error("rig: the intrinsics are for " + std::to_string(rc.camera.width) + "x" +
-                          std::to_string(rc.camera.height) + " but the take's images are " +
-                          std::to_string(size.width) + "x" + std::to_string(size.height),
-                      context);
-        }
-      }
-    } else {
-      if (size.empty()) {
-        ErrorContext context;
-        context.camera = cameras[i];
-        throw Error("rig: no readable image to size a first guess of the intrinsics from", context);
-      }
-      rc.camera.name = cameras[i];
-      rc.camera.width = size.width;
-      rc.camera.height = size.height;
-      rc.camera.fx = rc.camera.fy = size.width;
-      rc.camera.cx = (size.width - 1) / 2.0;
-      rc.camera.cy = (size.height - 1) / 2.0;
-      rc.role = cameras[i] == main_camera ? "main" : "witness";
-      std::cerr << "rig: " << cameras[i] << ": no intrinsics given; starting the estimate from fx = fy = "
-                << size.width << " px\n";
-    }
-    rc.T_world_cam = Pose::Identity();
-    rig.cameras.push_back(rc);
-  }
-  return rig;
-}
-
 // ---------------------------------------------------------------------------------------------
 // Reports
 
@@ -433,26 +342,38 @@ int runCalibrate(const RigArgs& a) {
     if (e == "all") e = "*";
   }
   RigPipelineOptions pipeline;
+  pipeline.detect = detectOptions(a);
+  pipeline.observations_cache = a.observations;
   RigCalibOptions& options = pipeline.calib;
   options.estimate_intrinsics = estimate;
   options.threads = a.threads;
   pipeline.sync.max_offset = a.max_offset;
   pipeline.sync.threads = a.threads;
   pipeline.validate();
-  const std::vector<std::optional<RigCamera>> known = resolveIntrinsics(a, cameras, estimate);
+  RigTake take;
+  take.take = a.take;
+  take.cameras = cameras;
+  take.board = board;
+  take.floor = floor;
+  take.main_camera = a.main_camera;
+  take.known = resolveIntrinsics(a, cameras, estimate);  // before detection: a missing file fails at once
   std::optional<Rig> compare;
   if (!a.compare.empty()) compare = readRig(a.compare);
-  if (!floor) std::cerr << "rig: no floor frames (no --floor, no floor.json in the take): world frame = " << cameras.front() << "\n";
 
-  double detect_s = 0;
-  bool cached = false;
-  const RigObservations obs = observe(a, cameras, board, floor ? &*floor : nullptr, &detect_s, &cached);
+  // Detect (or the --observations cache) -> initial rig -> solve -> sync check, as one library
+  // call (multicam/pipeline.h). Throws (naming the camera) on a camera the solve cannot place;
+  // nothing is written then.
+  std::unique_ptr<ProgressLine> progress;
+  const RigPipelineResult solved = calibrateRigTake(take, pipeline, [&](const DetectProgress& p) {
+    if (!progress) progress = std::make_unique<ProgressLine>("rig detect", p.images_total, a.quiet);
+    progress->update(p.images_done);
+  });
+  progress.reset();
+  for (const std::string& line : solved.log) std::cerr << "rig: " << line << "\n";
+  const RigObservations& obs = solved.observations;
+  const double detect_s = solved.detect_s;
+  const bool cached = solved.cached;
   printDetections(obs, detect_s, cached);
-  const Rig initial = initialRig(cameras, known, obs, a.main_camera);
-
-  // Solve, then the sync check (multicam/pipeline.h). Throws (naming the camera) on a camera the
-  // solve cannot place; nothing is written then.
-  const RigPipelineResult solved = solveRigTake(obs, initial, pipeline);
   const RigCalibResult& result = solved.calib;
   printCalib(result);
   const SyncReport& sync = solved.sync;
@@ -520,7 +441,7 @@ int runCheck(const RigArgs& a) {
   const std::vector<std::string> cameras = sortedIntersection(takeCameras(a.take), rig);
   double detect_s = 0;
   bool cached = false;
-  const RigObservations obs = observe(a, cameras, board, floor ? &*floor : nullptr, &detect_s, &cached);
+  const RigObservations obs = observe(a, cameras, board, floor, &detect_s, &cached);
   printDetections(obs, detect_s, cached);
   const RigCheckResult check = checkRig(rig, obs, a.flag_px);
   printCheck(check, a.flag_px);
@@ -564,7 +485,7 @@ int runResurvey(const RigArgs& a) {
   if (!a.compare.empty()) compare = readRig(a.compare);
   double detect_s = 0;
   bool cached = false;
-  const RigObservations obs = observe(a, cameras, board, floor ? &*floor : nullptr, &detect_s, &cached);
+  const RigObservations obs = observe(a, cameras, board, floor, &detect_s, &cached);
   printDetections(obs, detect_s, cached);
   const ResurveyResult r = resurveyCamera(rig, a.camera, obs, options);
   std::cerr << "rig resurvey: " << a.camera << " moved " << fmt("%.1f", 1000 * r.moved_m) << " mm and turned "

@@ -12,6 +12,7 @@
 #include "core/rig_import.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/srgb.h"
 #include "take/sequence.h"
 #include "take/video.h"
@@ -76,6 +77,16 @@ TEST(Sequence, PatternsAreFoundWhateverTheNameStartAndPadding) {
   EXPECT_FALSE(parsePattern("plate.exr"));
   EXPECT_FALSE(parsePattern("a%04d_%04d.png"));
   EXPECT_FALSE(parsePattern("%d.png")->frameOf("01.png"));
+}
+
+// core/names.h: previz's own frame name, read back through the take model's patterns.
+TEST(Sequence, FramePatternNamesFilesAsFrameStem) {
+  const auto pattern = parsePattern(std::string(kFramePattern) + ".png");
+  ASSERT_TRUE(pattern);
+  for (int f : {0, 7, 42, 999999}) {
+    EXPECT_EQ(pattern->fileName(f), frameStem(f) + ".png");
+    EXPECT_EQ(pattern->frameOf(frameStem(f) + ".png"), static_cast<long long>(f));
+  }
 }
 
 // The same 8-bit pictures as a PNG sequence from 1001 (its own numbers), a 16-bit TIFF sequence

@@ -22,6 +22,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/units.h"
 #include "live/frame_loop.h"
 #include "live/inputs.h"
 #include "app/options.h"
@@ -509,7 +510,7 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
       const Pose& T_true = rig->truth.at(rc.camera.name).T_world_cam;
       h << "<tr><td style=\"text-align:left\">" << rc.camera.name << "</td><td>" << cr.views << "</td><td>"
         << num(cr.rms_px, 3) << "</td><td>" << num(1e3 * translationDistance(rc.T_world_cam, T_true), 1)
-        << "</td><td>" << num(rotationDistance(rc.T_world_cam, T_true) * 180 / M_PI, 3) << "</td><td>"
+        << "</td><td>" << num(degrees(rotationDistance(rc.T_world_cam, T_true)), 3) << "</td><td>"
         << num(1e3 * cr.sigma_position_m, 1) << "</td><td>" << num(cr.sigma_rotation_deg, 3) << "</td></tr>\n";
     }
     h << "</table>\n<p><a href=\"rig.png\"><img src=\"rig.png\" style=\"width:80%\"></a></p>\n";
@@ -664,7 +665,7 @@ Runner addDemoCommand(CLI::App& app) {
         const Pose& T_true = rig_calib->truth.at(rc.camera.name).T_world_cam;
         rig_cams.push_back({{"camera", rc.camera.name},
                             {"position_error_m", translationDistance(rc.T_world_cam, T_true)},
-                            {"rotation_error_deg", rotationDistance(rc.T_world_cam, T_true) * 180 / M_PI}});
+                            {"rotation_error_deg", degrees(rotationDistance(rc.T_world_cam, T_true))}});
       }
       summary["rig"] = {{"rms_px", rig_calib->result.rms_px},
                         {"rig", (out / "rig.json").string()},

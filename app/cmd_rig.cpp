@@ -20,6 +20,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "core/units.h"
 #include "multicam/observations.h"
 #include "multicam/rig_calib.h"
 #include "multicam/rig_io.h"
@@ -34,7 +35,7 @@ namespace fs = std::filesystem;
 using namespace previz::multicam;
 
 constexpr int kExitCheckFailed = 3;
-constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+constexpr double kRadToDeg = degrees(1.0);
 
 struct RigArgs {
   std::string take, board, floor, out, rig, camera, intrinsics, estimate, lens, main_camera = "main";

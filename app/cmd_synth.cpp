@@ -12,6 +12,7 @@
 #include "app/commands.h"
 #include "app/options.h"
 #include "app/progress.h"
+#include "core/units.h"
 #include "datasets/synth.h"
 
 namespace previz::app {
@@ -62,7 +63,7 @@ void parseBump(const std::string& text, synth::SynthOptions& o) {
     badFlag("--bump", "expected " + form + " (got '" + text + "')");
   }
   const Eigen::Vector3d rotation_deg(v[3], v[4], v[5]);
-  const double angle = rotation_deg.norm() * M_PI / 180.0;
+  const double angle = radians(rotation_deg.norm());
   Pose bump = Pose::Identity();
   if (angle > 0) bump.linear() = Eigen::AngleAxisd(angle, rotation_deg.normalized()).toRotationMatrix();
   bump.translation() = Eigen::Vector3d(v[0], v[1], v[2]);

@@ -11,11 +11,12 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/units.h"
 
 namespace previz::batch {
 
 namespace {
-constexpr double kDeg = 180.0 / M_PI;
+constexpr double kDeg = degrees(1.0);
 }
 
 Eigen::Matrix3d yUpFromZUp() {

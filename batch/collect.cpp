@@ -18,6 +18,7 @@
 #include "core/pose_lines.h"
 #include "core/rig.h"
 #include "core/text.h"
+#include "core/units.h"
 
 namespace previz::batch {
 namespace fs = std::filesystem;
@@ -286,8 +287,8 @@ CollectSummary collectBatch(const Manifest& m, const CollectOptions& o) {
                        {"camera_axes", "x right, y up, looking down -z (Nuke/Maya)"},
                        {"source", take.main_poses.empty() ? "rig (static)" : take.main_poses.string()},
                        {"camera", cameraToJson(cam)},
-                       {"horizontal_fov_deg", 2 * std::atan(0.5 * cam.width / cam.fx) * 180 / M_PI},
-                       {"vertical_fov_deg", 2 * std::atan(0.5 * cam.height / cam.fy) * 180 / M_PI},
+                       {"horizontal_fov_deg", degrees(2 * std::atan(0.5 * cam.width / cam.fx))},
+                       {"vertical_fov_deg", degrees(2 * std::atan(0.5 * cam.height / cam.fy))},
                        {"frames", keysJson(keys, poses, "T_world_cam_previz")}});
       take_json["camera"] = {{"chan", chan}, {"json", json}};
       anim_links += "<li>main camera <code>" + htmlEscape(take.main_camera) + "</code>: <a href=\"" +

@@ -31,6 +31,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/units.h"
 #include "tests/tracking/filter_motion.h"
 #include "tests/tracking/studio_fixture.h"
 #include "tracking/filter.h"
@@ -183,7 +184,7 @@ void BM_FilterFollow(benchmark::State& state) {
   const bool turn = state.range(0) == 0, legacy = state.range(1) == 1;
   const FilterOptions options = legacy ? test::legacyFilterOptions() : FilterOptions{};
   constexpr double kSigmaDeg = 0.05, kSigmaMm = 0.3;
-  const double sr = kSigmaDeg * M_PI / 180, sp = 1e-3 * kSigmaMm;
+  const double sr = radians(kSigmaDeg), sp = 1e-3 * kSigmaMm;
   constexpr unsigned kSeed = 33;
   const int runs = turn ? 50 : 20;
   const test::PropMotion motion = turn ? test::turnMotion(10, 0.1, 0) : test::PropMotion{};
@@ -217,7 +218,7 @@ void BM_FilterFollow(benchmark::State& state) {
       res.cpu_ms.push_back((cpuMs() - c) / (runs * 110));
       std::snprintf(extra, sizeof(extra),
                     "\"options\":\"%s\",\"sigma_mm\":%.2f,\"sigma_deg\":%.3f,\"jitter_mm\":%.4f,\"jitter_deg\":%.5f",
-                    legacy ? "legacy" : "default", kSigmaMm, kSigmaDeg, 1e3 * j.position_m, j.rotation_rad * 180 / M_PI);
+                    legacy ? "legacy" : "default", kSigmaMm, kSigmaDeg, 1e3 * j.position_m, degrees(j.rotation_rad));
     }
     res.extra = extra;
   }

@@ -26,6 +26,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "calib/detail/detect_common.h"
+#include "core/units.h"
 
 namespace previz::calib::detail {
 
@@ -54,7 +55,7 @@ bool toEllipse(const cv::RotatedRect& r, Ellipse& e) {
   e.centre = Eigen::Vector2d(r.center.x, r.center.y);
   e.a = 0.5 * r.size.width;
   e.b = 0.5 * r.size.height;
-  e.angle = r.angle * M_PI / 180.0;
+  e.angle = radians(r.angle);
   return std::isfinite(e.a) && std::isfinite(e.b) && e.a > 0.5 && e.b > 0.5 && e.centre.allFinite();
 }
 

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "core/units.h"
 #include "datasets/random.h"
 #include "datasets/studio.h"
 
@@ -15,7 +16,7 @@ namespace previz::synth {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
+constexpr double kDeg = radians(1.0);
 
 // Streams of the layout generator, so adding draws to one never shifts another.
 enum Stream : std::uint64_t {

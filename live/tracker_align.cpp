@@ -13,6 +13,7 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "core/error.h"
+#include "core/units.h"
 
 namespace previz::live {
 
@@ -360,8 +361,8 @@ std::string TrackerAlignResult::fullReport() const {
                 "about a %.3f ms period (taken out)\n",
                 views, views_dropped, points, rms_px, iterations, solve_ms, 1e3 * T_tracker_cam.translation().x(),
                 1e3 * T_tracker_cam.translation().y(), 1e3 * T_tracker_cam.translation().z(),
-                1e3 * T_tracker_cam.translation().norm(), aa.angle() * 180 / M_PI, 1e3 * sigma_position_m,
-                sigma_rotation_rad * 180 / M_PI, covariance_ok ? "" : " (covariance not available)", 1e3 * delay_s,
+                1e3 * T_tracker_cam.translation().norm(), degrees(aa.angle()), 1e3 * sigma_position_m,
+                degrees(sigma_rotation_rad), covariance_ok ? "" : " (covariance not available)", 1e3 * delay_s,
                 1e3 * sigma_delay_s, arrival_jitter_ms, 1e3 * sample_period_s);
   s << line;
   return s.str();
@@ -374,7 +375,7 @@ nlohmann::json TrackerAlignResult::toJson() const {
           {"T_stage_board", poseToJson(T_stage_board)},
           {"delay_s", delay_s},
           {"sigma_position_m", sigma_position_m},
-          {"sigma_rotation_deg", sigma_rotation_rad * 180 / M_PI},
+          {"sigma_rotation_deg", degrees(sigma_rotation_rad)},
           {"sigma_delay_s", sigma_delay_s},
           {"covariance_ok", covariance_ok},
           {"rms_px", rms_px},

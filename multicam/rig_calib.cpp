@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/stats.h"
+#include "core/units.h"
 #include "multicam/detail/bundle.h"
 #include "multicam/detail/views.h"
 
@@ -29,7 +30,7 @@ using detail::View;
 using Clock = std::chrono::steady_clock;
 using ViewsByCamera = std::vector<std::map<int, View>>;
 
-constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+constexpr double kRadToDeg = degrees(1.0);
 // Residual cap (px) when candidate board poses are scored: a wrong candidate must not win
 // because one view's outliers are even worse under the right one.
 constexpr double kScoreCapPx = 10.0;

@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/units.h"
 
 namespace previz::tracking {
 
@@ -47,7 +48,7 @@ Eigen::Matrix3d cvToOt() {
 }
 
 Eigen::Matrix3d zxy(const Eigen::Vector3d& ptr_deg) {
-  const Eigen::Vector3d r = ptr_deg * M_PI / 180.0;
+  const Eigen::Vector3d r(radians(ptr_deg[0]), radians(ptr_deg[1]), radians(ptr_deg[2]));
   return (Eigen::AngleAxisd(r[0], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(r[1], Eigen::Vector3d::UnitX()) *
           Eigen::AngleAxisd(r[2], Eigen::Vector3d::UnitY()))
       .toRotationMatrix();
@@ -152,7 +153,7 @@ Eigen::Vector3d zxyDegFromRotation(const Eigen::Matrix3d& R) {
     pan = std::atan2(R(1, 0), R(0, 0));
     roll = 0;
   }
-  return Eigen::Vector3d(pan, tilt, roll) * 180.0 / M_PI;
+  return Eigen::Vector3d(degrees(pan), degrees(tilt), degrees(roll));
 }
 
 std::optional<CameraSample> decodeFreeDCamera(const std::uint8_t* data, size_t size, PacketFault* fault,

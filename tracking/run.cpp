@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/stats.h"
+#include "core/units.h"
 #include "take/take.h"
 
 namespace fs = std::filesystem;
@@ -213,9 +214,9 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
       const auto tp = tf->second.find(p.id);
       if (tp == tf->second.end()) continue;
       a.pos.push_back(1e3 * translationDistance(p.T_world_prop, tp->second));
-      a.rot.push_back(rotationDistance(p.T_world_prop, tp->second) * 180 / M_PI);
+      a.rot.push_back(degrees(rotationDistance(p.T_world_prop, tp->second)));
       a.mpos.push_back(1e3 * translationDistance(p.measured.T, tp->second));
-      a.mrot.push_back(rotationDistance(p.measured.T, tp->second) * 180 / M_PI);
+      a.mrot.push_back(degrees(rotationDistance(p.measured.T, tp->second)));
     }
     if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
   }
@@ -347,7 +348,7 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
       j["T_world_cam"] = poseToJson(T);
       j["T_world_cam_measured"] = poseToJson(e.T);
       j["sigma_position_mm"] = 1e3 * e.sigma_position_m;
-      j["sigma_rotation_deg"] = e.sigma_rotation_rad * 180 / M_PI;
+      j["sigma_rotation_deg"] = degrees(e.sigma_rotation_rad);
       j["rms_px"] = e.rms_px;
       j["tags"] = e.tags;
       j["corners"] = e.inliers;
@@ -355,7 +356,7 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
       const auto tt = truth.find(f);
       if (tt != truth.end()) {
         pos.push_back(1e3 * translationDistance(e.T, tt->second));
-        rot.push_back(rotationDistance(e.T, tt->second) * 180 / M_PI);
+        rot.push_back(degrees(rotationDistance(e.T, tt->second)));
       }
     } else {
       live = false;

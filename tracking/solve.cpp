@@ -12,6 +12,7 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "core/error.h"
+#include "core/units.h"
 
 namespace previz::tracking {
 
@@ -140,7 +141,7 @@ PoseEstimate solveCorners(const std::vector<Corner>& all, const std::vector<Pose
   }
   double rival = kInf;
   for (size_t i = 0; i < candidates.size(); ++i)
-    if (rotationDistance(candidates[i], candidates[best]) > 10.0 * M_PI / 180.0) rival = std::min(rival, scores[i]);
+    if (rotationDistance(candidates[i], candidates[best]) > radians(10.0)) rival = std::min(rival, scores[i]);
   est.ambiguity_ratio = rival / std::max(scores[best], 1e-12);
 
   Pose T = orthonormalised(candidates[best]);

@@ -15,6 +15,7 @@
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "core/units.h"
 #include "tracking/opentrackio.h"
 
 namespace previz::tracking {
@@ -128,11 +129,11 @@ Eigen::Vector3d panTiltRollDeg(const Eigen::Matrix3d& R) {
     pan = std::atan2(-R(0, 1), R(1, 1));
     roll = 0;
   }
-  return Eigen::Vector3d(pan, tilt, roll) * 180.0 / M_PI;
+  return Eigen::Vector3d(degrees(pan), degrees(tilt), degrees(roll));
 }
 
 Eigen::Matrix3d rotationFromPanTiltRoll(const Eigen::Vector3d& ptr) {
-  const Eigen::Vector3d r = ptr * M_PI / 180.0;
+  const Eigen::Vector3d r(radians(ptr[0]), radians(ptr[1]), radians(ptr[2]));
   return (Eigen::AngleAxisd(r[0], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(r[1], Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(r[2], Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
@@ -197,7 +198,7 @@ nlohmann::json openTrackIoSample(const PropResult& prop, int frame, double time_
     j["custom"] = {{"previz",
                     {{"prop_id", prop.id},
                      {"sigma_position_mm", 1e3 * prop.measured.sigma_position_m},
-                     {"sigma_rotation_deg", prop.measured.sigma_rotation_rad * 180 / M_PI},
+                     {"sigma_rotation_deg", degrees(prop.measured.sigma_rotation_rad)},
                      {"cameras", prop.cameras}}}};
   }
   return j;

@@ -9,6 +9,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/units.h"
 
 namespace previz::tracking {
 
@@ -323,7 +324,7 @@ nlohmann::json trackFrameToJson(const TrackFrame& f) {
       j["T_world_prop"] = poseToJson(r.T_world_prop);
       j["T_world_prop_measured"] = poseToJson(r.measured.T);
       j["sigma_position_mm"] = 1e3 * r.measured.sigma_position_m;
-      j["sigma_rotation_deg"] = r.measured.sigma_rotation_rad * 180.0 / M_PI;
+      j["sigma_rotation_deg"] = degrees(r.measured.sigma_rotation_rad);
       j["rms_px"] = r.measured.rms_px;
       j["cameras"] = r.cameras;
       j["tags"] = r.measured.tags;

@@ -8,7 +8,6 @@
 // take) and, for comparison, with the take's true rig, and writes a report page (report.html):
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
 // depth previews, the front/behind layer and the stage timings. Layout: docs/formats.md.
-#include <omp.h>
 
 #include <filesystem>
 #include <iostream>
@@ -22,6 +21,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/threads.h"
 #include "core/units.h"
 #include "live/frame_loop.h"
 #include "live/inputs.h"
@@ -202,7 +202,7 @@ std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, con
     pipeline.select = select;
     pipeline.solve.camera_name = name;
     pipeline.solve.threads = 2;
-    pipeline.threads = std::max(1, omp_get_max_threads());
+    pipeline.threads = defaultThreadCount();
     calib::ImageSet images;
     images.source = (take / "cams" / name).string();
     images.count = o.frames;

@@ -5,7 +5,6 @@
 // previz bench run: the same loop on frames held in memory, ms per stage, as JSON, with the
 // binary's start-up (shared libraries loaded, `previz --version` ms).
 #include <link.h>
-#include <omp.h>
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +20,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/threads.h"
 #include "live/frame_loop.h"
 #include "live/inputs.h"
 #include "live/tracker.h"
@@ -678,7 +678,7 @@ int runBench(const BenchArgs& a) {
   std::fprintf(stderr,
                "bench run: %s, %d threads: %.2f ms a frame (%.1f fps) against the %.0f ms target (%+.1f ms); largest "
                "stage: %s %.2f ms; reading the PNGs (not in the loop): %.1f ms a frame\n",
-               size.c_str(), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(), t, 1000.0 / t, budget_ms,
+               size.c_str(), resolveThreads(a.loop.threads), t, 1000.0 / t, budget_ms,
                t - budget_ms, largest.c_str(), largest_ms, median(read_ms));
   if (prop_frames > 0 && prop_full_frames == prop_frames)
     std::fprintf(stderr, "bench run: props searched every camera's whole frame on every frame (these frames are further "
@@ -687,12 +687,12 @@ int runBench(const BenchArgs& a) {
   std::fprintf(stderr, "bench run: start-up: %d shared libraries loaded, `previz --version` %.1f ms (median of 5)\n",
                startup_libraries, version_ms);
   std::fprintf(stderr, "bench run: CPU time a frame (all threads) %.2f ms: an idle %d-core machine that scaled perfectly "
-               "would take %.2f ms\n", median(total_cpu), a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads(),
-               median(total_cpu) / (a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()));
+               "would take %.2f ms\n", median(total_cpu), resolveThreads(a.loop.threads),
+               median(total_cpu) / resolveThreads(a.loop.threads));
   nlohmann::json j = {{"stage", "run"},      {"size", size},   {"ms", t}, {"cpu_ms", median(total_cpu)},
                       {"fps", 1000.0 / t},   {"target_ms", budget_ms}, {"largest_stage", largest},
                       {"largest_ms", largest_ms}, {"stages", stages}, {"frames", frames.size()},
-                      {"repeats", a.repeats}, {"threads", a.loop.threads > 0 ? a.loop.threads : omp_get_max_threads()},
+                      {"repeats", a.repeats}, {"threads", resolveThreads(a.loop.threads)},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
                       {"witness_bin", a.loop.witness_bin},
                       {"key_region_margin_px", a.loop.key_region_margin_px},
@@ -833,7 +833,7 @@ int runBenchTake(const BenchTakeArgs& a) {
                                 {"ms_first", first_ms},
                                 {"open_ms", open_ms},
                                 {"mb_per_frameset", bytes / 1e6 / std::max<size_t>(1, read_ms.size())},
-                                {"threads", omp_get_max_threads()}}
+                                {"threads", defaultThreadCount()}}
                      .dump()
               << "\n";
     std::cout << nlohmann::json{{"stage", "loop_with_read"},
@@ -843,7 +843,7 @@ int runBenchTake(const BenchTakeArgs& a) {
                                 {"ms", median(frame_ms)},
                                 {"read_ms", median(loop_read_ms)},
                                 {"fps", 1000.0 * frame_ms.size() / loop_ms},
-                                {"threads", omp_get_max_threads()}}
+                                {"threads", defaultThreadCount()}}
                      .dump()
               << "\n";
   }

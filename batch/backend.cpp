@@ -8,13 +8,13 @@
 #include <chrono>
 #include <fstream>
 #include <sstream>
-#include <thread>
 
 #include "batch/ledger.h"
 #include "batch/process.h"
 #include "batch/task.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/threads.h"
 
 namespace previz::batch {
 namespace fs = std::filesystem;
@@ -45,9 +45,9 @@ class LocalBackend : public Backend {
   Submission submit(const Manifest& m, const std::vector<int>& shards) override {
     Submission sub{"local", "local-" + std::to_string(unixMs()), shards, unixMs()};
     appendSubmission(m, sub);
-    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-    const int threads = o_.threads_per_job > 0 ? o_.threads_per_job
-                                               : std::max(1, static_cast<int>(cores) / o_.jobs);
+    // The machine's cores, not defaultThreadCount(): this divides the whole machine among jobs
+    // and sets each job's OMP_NUM_THREADS, so its own must not count.
+    const int threads = o_.threads_per_job > 0 ? o_.threads_per_job : std::max(1, coreCount() / o_.jobs);
     const auto t0 = std::chrono::steady_clock::now();
     Progress p;
     p.shards_total = static_cast<int>(shards.size());

@@ -30,6 +30,7 @@
 #include "carving/refine.h"
 #include "core/lens_model.h"
 #include "core/pose.h"
+#include "core/threads.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
 #include "datasets/studio.h"
@@ -187,7 +188,7 @@ Keyer& mainKeyer(int threads) {
 // machine the 1-thread CPU time is the figure that does not move with the other jobs.
 int benchThreads(const benchmark::State& state) {
   return state.range(1) > 0 ? static_cast<int>(state.range(1))
-                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+                            : coreCount();
 }
 std::string threadKey(int threads) { return "_t" + std::to_string(threads); }
 
@@ -520,7 +521,7 @@ RingCase& ringCase(int cameras, int threads) {
     c.witnesses = witnessRings(cameras);
     c.silhouettes.masks.resize(cameras);
     std::vector<std::thread> pool;
-    const int workers = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    const int workers = coreCount();
     for (int th = 0; th < workers; ++th)
       pool.emplace_back([&, th] {
         for (int i = th; i < cameras; i += workers)
@@ -686,7 +687,7 @@ int main(int argc, char** argv) {
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   auto& r = results();
-  const int machine_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int machine_threads = coreCount();
   for (int threads : {1, machine_threads}) {
     // Keying as the live loop pays it: 8 witnesses + main, one after another.
     const std::string w = "1_key_witness" + threadKey(threads), m = "2_key_main" + threadKey(threads);

@@ -7,7 +7,6 @@
 // of one of its camera-frames in the same process:
 //   {"stage":"rig_capture_frame","size":"1280x720",...,"ms":...,"full_render_ms":...,"ratio":...}
 #include <benchmark/benchmark.h>
-#include <omp.h>
 
 #include <chrono>
 #include <cstdio>
@@ -16,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "core/threads.h"
 #include "datasets/render.h"
 #include "datasets/rig_capture.h"
 #include "datasets/rigs.h"
@@ -173,7 +173,7 @@ int main(int argc, char** argv) {
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
-  const int threads = omp_get_max_threads();
+  const int threads = defaultThreadCount();
   for (const auto& [key, c] : results()) {
     if (c.cameras == 1) {
       std::printf("{\"stage\":\"render\",\"camera\":\"%s\",\"size\":\"%s\",\"spp\":%d,"

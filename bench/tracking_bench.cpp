@@ -28,9 +28,9 @@
 #include <map>
 #include <set>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "core/threads.h"
 #include "core/units.h"
 #include "tests/tracking/filter_motion.h"
 #include "tests/tracking/studio_fixture.h"
@@ -85,7 +85,7 @@ double median(std::vector<double> v) {
 }
 int benchThreads(const benchmark::State& state) {
   return state.range(0) > 0 ? static_cast<int>(state.range(0))
-                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+                            : coreCount();
 }
 
 // Tags found per frame per camera by the last full-frame and ROI runs (for the comparison).

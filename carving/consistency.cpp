@@ -14,6 +14,7 @@
 #include "carving/hull.h"
 #include "core/error.h"
 #include "core/stats.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 
@@ -150,7 +151,7 @@ class Judge {
     return depth < std::numeric_limits<float>::infinity();
   }
 
-  int threads() const { return o_.threads > 0 ? o_.threads : omp_get_max_threads(); }
+  int threads() const { return resolveThreads(o_.threads); }
 
  private:
   RigCamera scaled(RigCamera rc) const {

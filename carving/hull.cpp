@@ -35,6 +35,7 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 
@@ -48,7 +49,6 @@ using detail::Grid;
 using detail::RayTable;
 using detail::kRefineIterations;
 using detail::kSamplesPerVoxel;
-using detail::threadCount;
 
 namespace {
 
@@ -782,7 +782,7 @@ VisualHull Carver::carve(const Silhouettes& silhouettes) {
     throw Error("carve: got " + std::to_string(silhouettes.dropped.size()) +
                     " drop reasons for " + std::to_string(n) + " cameras",
                 fieldContext("dropped"));
-  const int threads = threadCount(im.options.threads);
+  const int threads = resolveThreads(im.options.threads);
 
   auto data = std::make_shared<HullData>();
   data->origin = im.grid.origin;

@@ -14,6 +14,7 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 
@@ -24,7 +25,6 @@ using detail::HullData;
 using detail::RayTable;
 using detail::kRefineIterations;
 using detail::kSamplesPerVoxel;
-using detail::threadCount;
 
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -387,7 +387,7 @@ cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
     out.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
     return out;
   }
-  const int threads = threadCount(impl_->options.threads);
+  const int threads = resolveThreads(impl_->options.threads);
   const std::shared_ptr<const RayTable> table = impl_->rayTable(cam, threads);
   const HullData& h = *hull.data;
   CameraModel model = table->model;

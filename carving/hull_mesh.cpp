@@ -13,12 +13,12 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 
 using detail::HullData;
 using detail::kRefineIterations;
-using detail::threadCount;
 
 // ---------------------------------------------------------------------------------------------
 // Mesh: surface nets over the surface voxels
@@ -213,7 +213,7 @@ void smooth(std::vector<Eigen::Vector3d>& p, const std::vector<Eigen::Vector3i>&
 TriangleMesh Carver::mesh(const VisualHull& hull) const {
   TriangleMesh mesh;
   if (!hull.data || hull.data->surface_info.empty()) return mesh;
-  MeshBuilder b{*hull.data, threadCount(impl_->options.threads), {}, {}, {}, {}};
+  MeshBuilder b{*hull.data, resolveThreads(impl_->options.threads), {}, {}, {}, {}};
   b.computeSigns();
   b.computeVertices();
   long long anomalies = 0;

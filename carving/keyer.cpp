@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 namespace {
@@ -96,8 +97,6 @@ void checkImage(const cv::Mat& bgr8, const std::string& source) {
          source);
   }
 }
-
-int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
 float chromaQ(float r, float g, float b) { return (g - std::max(r, b)) / std::max(g, 1e-6f); }
 
@@ -1312,7 +1311,7 @@ void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result) {
   cv::Mat alpha8 = alpha8_(r);
   cv::Mat silhouette = result.silhouette(r);
   cv::Mat residual = f.difference ? shadow_residual_(r) : cv::Mat();
-  const int threads = threadCount(options_.threads);
+  const int threads = resolveThreads(options_.threads);
   const int W = bgr8.cols, H = bgr8.rows;
   const bool use_plate = sm.from_clean_plate;
   const int bands = (H + kBandRows - 1) / kBandRows;
@@ -1464,7 +1463,7 @@ void despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& scre
   cv::Mat& work = screen.backdrop == Backdrop::kBlue ? work_blue : out;
   work.create(H, W, CV_8UC3);
   const bool spill = screen.backdrop != Backdrop::kNone;
-  const int threads = threadCount(options.threads);
+  const int threads = resolveThreads(options.threads);
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
   for (int y = 0; y < H; ++y) {
     const std::uint8_t* in = bgr8.ptr<std::uint8_t>(y);

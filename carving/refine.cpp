@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 
@@ -386,7 +387,7 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
   for (const Witness& w : witnesses) refs.push_back(&w);
   cv::Mat out = hull_depth.clone();
   const float main_inv_gain = static_cast<float>(1.0 / (plate.gain > 0 ? plate.gain : 1.0));
-  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const int threads = resolveThreads(options.threads);
   const ViewCounts n =
       refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, refs, options, nullptr, threads);
   local.pixels = n.pixels;
@@ -523,7 +524,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   std::vector<Witness> views = makeWitnesses(carver, hull, camera, plate, hull_depth,
                                              witness_plates, witness_masks, local.depth, &index);
   const int nw = static_cast<int>(views.size());
-  const int threads = options.refine.threads > 0 ? options.refine.threads : omp_get_max_threads();
+  const int threads = resolveThreads(options.refine.threads);
   {
     // The depth camera as the witnesses' reference: its silhouette is where its hull depth is.
     Witness m;

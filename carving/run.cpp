@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
+#include "core/threads.h"
 
 namespace previz::carving {
 namespace fs = std::filesystem;
@@ -252,7 +253,7 @@ struct CarveJob::Impl {
       in.plates.resize(n);
       in.plate_missing.resize(n);
     }
-    const int threads = options.hull.threads > 0 ? options.hull.threads : omp_get_max_threads();
+    const int threads = resolveThreads(options.hull.threads);
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (int i = 0; i < n; ++i) {
       if (!unusable[i].empty()) {

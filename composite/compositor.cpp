@@ -15,14 +15,13 @@
 
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/threads.h"
 
 namespace previz::composite {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr float kInf = std::numeric_limits<float>::infinity();
-
-int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
 // Linear [0, 1] in 65536 steps -> 8-bit sRGB code, rounded as the renderer rounds. The step
 // (1.5e-5 linear) is below a tenth of a code everywhere, darks included.
@@ -233,7 +232,7 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
   };
 
   long long actor_px = 0, actor_front = 0, cg_front = 0, filled = 0, fallback = 0;
-#pragma omp parallel for schedule(static, 16) num_threads(threadCount(options_.threads)) \
+#pragma omp parallel for schedule(static, 16) num_threads(resolveThreads(options_.threads)) \
     reduction(+ : actor_px, actor_front, cg_front, filled, fallback)
   for (int v = 0; v < H; ++v) {
     const Tap* tap_row = taps_.data() + static_cast<size_t>(v) * W;

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/threads.h"
 #include "datasets/detail/board_view.h"
 #include "datasets/detail/render_kernel.h"
 #include "datasets/random.h"
@@ -201,14 +202,14 @@ const BoardView::Cache& BoardView::cache() const {
     const SpanTracer tracer(camera_, T_world_cam_, options_.samples_per_pixel, options_.gain);
     cv::Mat linear(camera_.height, camera_.width, CV_32FC3);
     cache->stage_t.create(camera_.height, camera_.width, CV_32FC1);
-#pragma omp parallel for schedule(dynamic, 2) num_threads(threadCount(options_.threads))
+#pragma omp parallel for schedule(dynamic, 2) num_threads(resolveThreads(options_.threads))
     for (int v = 0; v < camera_.height; ++v) {
       tracer.traceRow(stage_, v, 0, camera_.width - 1, linear.ptr<float>(v), nullptr, nullptr,
                       cache->stage_t.ptr<float>(v));
     }
     cv::Mat seen = linear;
     if (options_.blur_sigma_px > 0) {
-      seen = GaussianBlur(options_.blur_sigma_px).apply(linear, threadCount(options_.threads));
+      seen = GaussianBlur(options_.blur_sigma_px).apply(linear, resolveThreads(options_.threads));
       cache->linear = linear;
     }
     cache->enc = encodeBgr(seen);
@@ -236,7 +237,7 @@ cv::Mat BoardView::render(const BoardSpec& spec, const Pose& T_world_board, bool
                           BoardViewStats* stats) const {
   const Cache& c = cache();
   const int W = camera_.width, H = camera_.height;
-  const int threads = threadCount(options_.threads);
+  const int threads = resolveThreads(options_.threads);
   const Region region = boardRegion(camera_, T_world_cam_.inverse() * T_world_board, spec);
   BoardViewStats local;
   local.whole_image = region.whole_image;

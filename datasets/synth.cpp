@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "core/threads.h"
 #include "datasets/detail/board_view.h"
 #include "datasets/random.h"
 #include "datasets/render.h"
@@ -382,7 +383,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
 
   // Board presets: the stage is static, so each camera renders its empty stage once and then
   // only the board's part of the image (datasets/detail/board_view.h).
-  const int threads = o.threads > 0 ? o.threads : omp_get_max_threads();
+  const int threads = resolveThreads(o.threads);
   std::unique_ptr<RigCapture> capture;
   std::unique_ptr<detail::BoardView> intrinsics_view;
   BoardFrames board_frames;

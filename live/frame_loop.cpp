@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/pose.h"
+#include "core/threads.h"
 
 namespace previz::live {
 namespace {
@@ -112,7 +113,7 @@ struct FrameLoop::Impl {
   cv::Mat foreground;
   std::optional<int> last_frame;      // the last frame keyed (region keying needs consecutive ones)
 
-  int threads() const { return options.threads > 0 ? options.threads : omp_get_max_threads(); }
+  int threads() const { return resolveThreads(options.threads); }
 
   void key(FrameState& s) {
     const int n = static_cast<int>(carve_names.size());

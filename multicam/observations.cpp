@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/threads.h"
 #include "take/take.h"
 
 namespace previz::multicam {
@@ -308,7 +309,7 @@ RigObservations detectTake(const fs::path& take, const std::vector<std::string>&
   std::atomic<int> done{0};
   const auto start = std::chrono::steady_clock::now();
   std::string progress_error;
-  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const int threads = resolveThreads(options.threads);
 
   // Each item is independent; errors are recorded per item (STYLE.md rule 11).
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)

@@ -12,6 +12,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "core/error.h"
+#include "core/threads.h"
 #include "multicam/detail/views.h"
 
 namespace previz::multicam::detail {
@@ -142,7 +143,7 @@ std::vector<std::map<int, View>> collectViews(const RigObservations& obs, const 
   for (auto& per_camera : views)
     for (auto& [frame, v] : per_camera) all.push_back(&v);
   // Views are independent; robustViewPose does not throw (OpenCV exceptions caught inside).
-#pragma omp parallel for schedule(dynamic, 4) num_threads(threads > 0 ? threads : omp_get_max_threads())
+#pragma omp parallel for schedule(dynamic, 4) num_threads(resolveThreads(threads))
   for (int k = 0; k < static_cast<int>(all.size()); ++k) {
     robustViewPose(rig.cameras[all[k]->camera].camera, *all[k], min_points);
   }

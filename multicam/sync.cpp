@@ -11,6 +11,7 @@
 #include "calib/intrinsics.h"
 #include "core/error.h"
 #include "core/stats.h"
+#include "core/threads.h"
 
 namespace previz::multicam {
 namespace {
@@ -194,7 +195,7 @@ SyncReport checkSync(const RigObservations& obs, const Rig& intrinsics, const Sy
     }
   }
   std::vector<std::optional<Pose>> poses(items.size());
-  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const int threads = resolveThreads(options.threads);
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
   for (int i = 0; i < static_cast<int>(items.size()); ++i) {
     const Track& t = tracks[items[i].track];

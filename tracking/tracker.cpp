@@ -9,6 +9,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/threads.h"
 #include "core/units.h"
 
 namespace previz::tracking {
@@ -182,7 +183,7 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
 
   // Detection, one camera per iteration; errors are recorded per camera (STYLE.md rule 11).
   std::vector<std::vector<TagDetection>> found(static_cast<size_t>(n_cams));
-  const int threads = m.options.threads > 0 ? m.options.threads : omp_get_max_threads();
+  const int threads = resolveThreads(m.options.threads);
   // Camera c's search, its whole frame or the predicted regions, into out.search[c] and found[c].
   const auto search = [&](int c, bool whole_frame) {
     CameraSearch& s = out.search[static_cast<size_t>(c)];

@@ -3,8 +3,6 @@
 // hull_depth.cpp: depth for any camera, hull_mesh.cpp: the surface mesh): the Carver's state, the
 // cells carving passes between levels, the per-lens ray tables of depth(), and the sampling
 // constants along a ray. Internal to carving/.
-#include <omp.h>
-
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -23,8 +21,6 @@ namespace previz::carving::detail {
 // step: 0.08 mm at 5 mm cells). Mesh edges use the same bisection.
 inline constexpr int kSamplesPerVoxel = 2;
 inline constexpr int kRefineIterations = 5;
-
-inline int threadCount(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
 // The finest grid over the volume and the number of levels above it.
 struct Grid {

@@ -22,6 +22,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/leftovers.h"
+#include "core/stopwatch.h"
 
 namespace previz::app {
 namespace {
@@ -149,8 +150,8 @@ std::unique_ptr<batch::Backend> slurmBackend(const BatchArgs& a) {
 
 // Polls the queue until none of the batch's tasks is pending or running.
 void waitForSlurm(batch::Backend& backend, const batch::Manifest& m, const BatchArgs& a) {
-  const auto t0 = std::chrono::steady_clock::now();
-  auto last = t0;
+  const Stopwatch since_start;
+  Stopwatch since_print;
   int last_active = -1;
   for (;;) {
     const std::map<int, std::string> states = backend.schedulerStates(m);
@@ -159,11 +160,10 @@ void waitForSlurm(batch::Backend& backend, const batch::Manifest& m, const Batch
       active += schedulerActive(state) ? 1 : 0;
       running += state == "RUNNING" ? 1 : 0;
     }
-    const auto now = std::chrono::steady_clock::now();
-    if (!a.quiet && (active != last_active || std::chrono::duration<double>(now - last).count() >= 10)) {
+    if (!a.quiet && (active != last_active || since_print.seconds() >= 10)) {
       std::fprintf(stderr, "[batch] slurm: %d tasks running, %d pending | elapsed %.1f s\n", running,
-                   active - running, std::chrono::duration<double>(now - t0).count());
-      last = now;
+                   active - running, since_start.seconds());
+      since_print.restart();
       last_active = active;
     }
     if (active == 0) return;

@@ -11,7 +11,6 @@
 
 #include <filesystem>
 #include <iostream>
-#include <chrono>
 #include <map>
 #include <optional>
 #include <sstream>

@@ -2,7 +2,6 @@
 // calibrated rig (reprojection + frame sync) on a new capture, re-survey one bumped camera.
 // Thin: resolve inputs, detect (multicam/observations.h), call multicam/, write outputs.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>

@@ -7,7 +7,6 @@
 #include <link.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -20,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 #include "live/frame_loop.h"
 #include "live/inputs.h"
@@ -60,9 +60,6 @@ using live::kLiveVoxelM;
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
 std::string stem(int frame) {
   char s[32];
@@ -316,12 +313,12 @@ int runRun(const RunArgs& a) {
   double total_ms = 0;
   nlohmann::json dropped = nlohmann::json::array();
   nlohmann::json failed = nlohmann::json::array();  // frames not composited: {"frame", "reason"}
-  const Clock::time_point start = Clock::now();
+  const Stopwatch start;
   int done = 0;
   std::vector<int> ran;
   const size_t live_limit = range.end >= 0 ? static_cast<size_t>(range.end - range.first) : 0;
   for (size_t next = 0;; ++next) {
-    const Clock::time_point t0 = Clock::now();
+    const Stopwatch t0;
     FrameState s;
     if (live) {
       if (live_limit > 0 && ran.size() >= live_limit) break;
@@ -339,7 +336,7 @@ int runRun(const RunArgs& a) {
     }
     const int f = s.frame;
     ran.push_back(f);
-    const double read_ms = msSince(t0);
+    const double read_ms = t0.ms();
     std::vector<StageTime> times;
     try {
       times = l.loop->run(s);
@@ -349,13 +346,13 @@ int runRun(const RunArgs& a) {
       std::cerr << "run: frame " << f << " failed: " << e.what() << "\n";
       continue;
     }
-    const Clock::time_point w0 = Clock::now();
+    const Stopwatch w0;
     writer.write(f, s.composite);
     writeDepthExr(out / "depth" / (stem(f) + ".exr"), s.main_depth,
                   {{"previz:camera", main}, {"previz:frame", std::to_string(f)},
                    {"previz:source", "visual hull (previz run)"}});
     if (a.meshes) writePly(l.loop->carver().mesh(s.hull), out / "mesh" / (stem(f) + ".ply"));
-    const double write_ms = msSince(w0);
+    const double write_ms = w0.ms();
     times.insert(times.begin(), StageTime{"read", read_ms});
     times.push_back(StageTime{"write", write_ms});
     double frame_ms = 0;
@@ -387,7 +384,7 @@ int runRun(const RunArgs& a) {
                   .dump() + "\n";
     ++done;
     if (!a.quiet) {
-      const double fps = 1000.0 * done / std::max(1e-9, msSince(start));
+      const double fps = 1000.0 * done / std::max(1e-9, start.ms());
       std::fprintf(stderr, "[run] frame %d (%d/%s) |", f, done, live ? "live" : std::to_string(frames.size()).c_str());
       for (const StageTime& t : times) std::fprintf(stderr, " %s %.1f", t.stage.c_str(), t.ms);
       std::fprintf(stderr, " ms | %.2f fps%s\n", fps,
@@ -467,10 +464,10 @@ double versionMs() {
   spec.stdout_path = "/dev/null";
   std::vector<double> ms;
   for (int i = 0; i < 5; ++i) {
-    const Clock::time_point t0 = Clock::now();
+    const Stopwatch t0;
     if (const int status = batch::runProcess(spec))
       throw Error("bench run: `previz --version` exited with " + std::to_string(status), fileContext(spec.argv[0]));
-    ms.push_back(msSince(t0));
+    ms.push_back(t0.ms());
   }
   return median(ms);
 }
@@ -623,9 +620,9 @@ int runBench(const BenchArgs& a) {
   std::vector<FrameState> inputs(frames.size());
   std::vector<double> read_ms;
   for (size_t i = 0; i < frames.size(); ++i) {
-    const Clock::time_point t0 = Clock::now();
+    const Stopwatch t0;
     l.reader->read(frames[i], inputs[i]);
-    read_ms.push_back(msSince(t0));
+    read_ms.push_back(t0.ms());
   }
   // Warm-up: the keyers' screen models and the depth ray table are built on the first frame.
   { FrameState s = inputs[0]; l.loop->run(s); }
@@ -783,9 +780,9 @@ int runBenchTake(const BenchTakeArgs& a) {
   }
   for (const auto& [format, dir] : sources) {
     // The frame sets alone, frames in order (videos decode ahead on their worker threads).
-    const Clock::time_point t_open = Clock::now();
+    const Stopwatch t_open;
     const take::Take t(dir);
-    const double open_ms = msSince(t_open);
+    const double open_ms = t_open.ms();
     std::vector<double> read_ms;
     long long bytes = 0;
     std::error_code ec;
@@ -793,9 +790,9 @@ int runBenchTake(const BenchTakeArgs& a) {
       if (e.is_regular_file(ec)) bytes += static_cast<long long>(e.file_size(ec));
     std::string size;
     for (int f : t.frames()) {
-      const Clock::time_point t0 = Clock::now();
+      const Stopwatch t0;
       const take::FrameSet set = t.readFrameSet(f, t.cameras());
-      read_ms.push_back(msSince(t0));
+      read_ms.push_back(t0.ms());
       if (set.usable() != static_cast<int>(t.cameras().size()))
         throw Error("bench take: a camera of frame " + std::to_string(f) + " did not read", fileContext(dir.string()));
     }
@@ -811,16 +808,16 @@ int runBenchTake(const BenchTakeArgs& a) {
       l.loop->run(warm);
     }
     std::vector<double> frame_ms, loop_read_ms;
-    const Clock::time_point t_loop = Clock::now();
+    const Stopwatch t_loop;
     for (size_t i = 1; i < frames.size(); ++i) {
-      const Clock::time_point t0 = Clock::now();
+      const Stopwatch t0;
       FrameState s;
       l.reader->read(frames[i], s);
-      loop_read_ms.push_back(msSince(t0));
+      loop_read_ms.push_back(t0.ms());
       l.loop->run(s);
-      frame_ms.push_back(msSince(t0));
+      frame_ms.push_back(t0.ms());
     }
-    const double loop_ms = msSince(t_loop);
+    const double loop_ms = t_loop.ms();
     const Camera& main = l.take->rig().at(l.loop->mainCamera()).camera;
     const Camera& w0 = l.take->rig().at(l.loop->carveCameras().front()).camera;
     size = std::to_string(l.loop->carveCameras().size()) + "x" + std::to_string(w0.width) + "x" +

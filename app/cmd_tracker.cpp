@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "core/stopwatch.h"
 #include "datasets/rigs.h"
 #include "live/tracker.h"
 #include "live/tracker_align.h"
@@ -26,7 +27,6 @@ namespace previz::app {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 
 struct RecordArgs {
   std::string listen, out;
@@ -89,9 +89,9 @@ int runReplay(const ReplayArgs& a) {
   if (!a.quiet)
     std::cerr << "tracker replay: " << r.datagrams.size() << " datagrams to " << url.host << ":" << url.port << " at x"
               << a.speed << "\n";
-  const Clock::time_point t0 = Clock::now();
+  const Stopwatch t0;
   const int sent = live::replayRecording(r, url.host, url.port, a.speed);
-  const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+  const double s = t0.seconds();
   if (a.json)
     std::cout << nlohmann::json{{"command", "tracker replay"}, {"sent", sent}, {"datagrams", r.datagrams.size()}, {"seconds", s}}
                      .dump()

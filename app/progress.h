@@ -1,27 +1,25 @@
 #pragma once
 // A progress line for long CLI jobs: frames done, fps, ETA on stderr. On a terminal it rewrites
 // one line; otherwise (logs, CI) it prints a line at most every few seconds.
-#include <chrono>
 #include <cstdio>
 #include <string>
 
 #include <unistd.h>
+
+#include "core/stopwatch.h"
 
 namespace previz::app {
 
 class ProgressLine {
  public:
   ProgressLine(std::string label, int total, bool quiet = false)
-      : label_(std::move(label)), total_(total), quiet_(quiet), tty_(isatty(2) != 0),
-        start_(std::chrono::steady_clock::now()), last_print_(start_) {}
+      : label_(std::move(label)), total_(total), quiet_(quiet), tty_(isatty(2) != 0) {}
 
   void update(int done) {
     if (quiet_) return;
-    const auto now = std::chrono::steady_clock::now();
-    const double elapsed = std::chrono::duration<double>(now - start_).count();
-    const double since_print = std::chrono::duration<double>(now - last_print_).count();
-    if (!tty_ && done < total_ && since_print < 5.0) return;
-    last_print_ = now;
+    const double elapsed = since_start_.seconds();
+    if (!tty_ && done < total_ && since_print_.seconds() < 5.0) return;
+    since_print_.restart();
     const double fps = elapsed > 0 ? done / elapsed : 0.0;
     const double eta = fps > 0 ? (total_ - done) / fps : 0.0;
     std::fprintf(stderr, "%s[%s] frame %d/%d | %.2f fps | elapsed %.1f s | ETA %.1f s%s",
@@ -36,7 +34,7 @@ class ProgressLine {
   int total_;
   bool quiet_;
   bool tty_;
-  std::chrono::steady_clock::time_point start_, last_print_;
+  Stopwatch since_start_, since_print_;
 };
 
 }  // namespace previz::app

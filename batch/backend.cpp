@@ -5,7 +5,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <fstream>
 #include <sstream>
 
@@ -14,6 +13,7 @@
 #include "batch/task.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::batch {
@@ -48,7 +48,7 @@ class LocalBackend : public Backend {
     // The machine's cores, not defaultThreadCount(): this divides the whole machine among jobs
     // and sets each job's OMP_NUM_THREADS, so its own must not count.
     const int threads = o_.threads_per_job > 0 ? o_.threads_per_job : std::max(1, coreCount() / o_.jobs);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Progress p;
     p.shards_total = static_cast<int>(shards.size());
     for (int s : shards) p.frames_total += static_cast<int>(m.shards.at(s).frames.size());
@@ -58,7 +58,7 @@ class LocalBackend : public Backend {
     auto report = [&]() {
       p.shards_running = static_cast<int>(running.size());
       p.frames_done = countLedgerFrames(m, shards) - frames_before;
-      p.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      p.elapsed_s = t0.seconds();
       if (o_.progress) o_.progress(p);
     };
     while (next < shards.size() || !running.empty()) {

@@ -12,6 +12,7 @@
 #include "batch/process.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stopwatch.h"
 
 namespace previz::batch {
 namespace fs = std::filesystem;
@@ -28,11 +29,6 @@ fs::path shardStatePath(const Manifest& manifest, int shard) {
 fs::path shardLogDir(const Manifest& manifest) { return manifest.job_dir / "logs"; }
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 void writeState(const Manifest& m, int shard, const std::string& state, long long started,
                 const TaskResult* r) {
@@ -64,7 +60,7 @@ void writeState(const Manifest& m, int shard, const std::string& state, long lon
 }  // namespace
 
 TaskResult runShardTask(const Manifest& m, int shard_id) {
-  const Clock::time_point t0 = Clock::now();
+  const Stopwatch t0;
   const long long started = unixMs();  // before the input checksums: they are the task's overhead
   if (shard_id < 0 || shard_id >= static_cast<int>(m.shards.size())) {
     ErrorContext c;
@@ -106,7 +102,7 @@ TaskResult runShardTask(const Manifest& m, int shard_id) {
     it = planned.count(it->first) ? std::next(it) : ledger.frames.erase(it);
   writeLedger(m, ledger);
 
-  const Clock::time_point ts = Clock::now();
+  const Stopwatch ts;
   for (const StagePlan& stage : take.stages) {
     const std::string stem = std::to_string(shard_id) + "." + stage.name;
     ProcessSpec spec;
@@ -130,7 +126,7 @@ TaskResult runShardTask(const Manifest& m, int shard_id) {
                                spec.stdout_path.string() + ": " + e.what());
     }
   }
-  r.stage_ms = msSince(ts);
+  r.stage_ms = ts.ms();
 
   // Newly finished frames: every output of every stage present and non-empty (each stage
   // writes its marker last and atomically, so a present marker means a complete frame).
@@ -157,7 +153,7 @@ TaskResult runShardTask(const Manifest& m, int shard_id) {
     }
   }
   writeLedger(m, ledger);
-  r.total_ms = msSince(t0);
+  r.total_ms = t0.ms();
   writeState(m, shard_id, r.complete() ? "done" : "failed", started, &r);
   return r;
 }

@@ -6,7 +6,6 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <map>
 #include <string>
@@ -16,6 +15,7 @@
 #include "calib/frontal.h"
 #include "calib/intrinsics.h"
 #include "calib/selection.h"
+#include "core/stopwatch.h"
 #include "datasets/random.h"
 #include "datasets/render.h"
 #include "datasets/rigs.h"
@@ -104,9 +104,9 @@ template <typename F>
 double medianMs(F&& f, int runs = 7) {
   std::vector<double> ms;
   for (int i = 0; i < runs; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     f();
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    ms.push_back(t0.ms());
   }
   std::sort(ms.begin(), ms.end());
   return ms[ms.size() / 2];

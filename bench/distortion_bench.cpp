@@ -4,13 +4,13 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <string>
 #include <vector>
 
 #include "core/camera.h"
 #include "core/distortion_maps.h"
+#include "core/stopwatch.h"
 
 namespace previz {
 namespace {
@@ -136,10 +136,9 @@ template <typename F>
 double medianMs(F&& f, int runs = 7) {
   std::vector<double> ms;
   for (int i = 0; i < runs; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     f();
-    const auto t1 = std::chrono::steady_clock::now();
-    ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    ms.push_back(t0.ms());
   }
   std::sort(ms.begin(), ms.end());
   return ms[ms.size() / 2];

@@ -10,13 +10,13 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include "core/stopwatch.h"
 #include "multicam/rig_calib.h"
 #include "tests/multicam/rig_calib_fixtures.h"
 
@@ -34,9 +34,9 @@ template <typename F>
 double medianMs(F&& f, int runs) {
   std::vector<double> ms;
   for (int i = 0; i < runs; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     f();
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    ms.push_back(t0.ms());
   }
   std::sort(ms.begin(), ms.end());
   return ms[ms.size() / 2];

@@ -8,13 +8,13 @@
 //   {"stage":"rig_capture_frame","size":"1280x720",...,"ms":...,"full_render_ms":...,"ratio":...}
 #include <benchmark/benchmark.h>
 
-#include <chrono>
 #include <cstdio>
 #include <ctime>
 #include <map>
 #include <string>
 #include <vector>
 
+#include "core/stopwatch.h"
 #include "core/threads.h"
 #include "datasets/render.h"
 #include "datasets/rig_capture.h"
@@ -57,13 +57,12 @@ void renderCameras(benchmark::State& state, const std::string& key, const std::s
   double total_ms = 0;
   int runs = 0;
   for (auto _ : state) {
-    const auto start = std::chrono::steady_clock::now();
+    const Stopwatch start;
     for (const RigCamera* rc : cameras) {
       RenderedView view = renderView(rc->camera, rc->T_world_cam, scene, options);
       benchmark::DoNotOptimize(view.bgr.data);
     }
-    total_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                    .count();
+    total_ms += start.ms();
     ++runs;
   }
   const RigCamera& first = *cameras.front();
@@ -123,7 +122,7 @@ void BM_RigCaptureWitness720p(benchmark::State& state) {
   RigCaptureCase& c = rigCaptureCase();
   for (auto _ : state) {
     const RigCapture capture(o);
-    const auto start = std::chrono::steady_clock::now();
+    const Stopwatch start;
     const double cpu_start = threadCpuMs();
     for (int f = 0; f < o.frames; ++f) {
       cv::Mat image = capture.render(camera, f);
@@ -131,8 +130,7 @@ void BM_RigCaptureWitness720p(benchmark::State& state) {
       if (f == 0) c.first_ms = threadCpuMs() - cpu_start;
     }
     c.cpu_ms = (threadCpuMs() - cpu_start) / o.frames;
-    c.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-               .count() / o.frames;
+    c.ms = start.ms() / o.frames;
 
     // The same camera-frame rendered whole, as synth rendered board takes before.
     const int frame = o.frames / 2;
@@ -147,13 +145,12 @@ void BM_RigCaptureWitness720p(benchmark::State& state) {
     ro.samples_per_pixel = o.samples_per_pixel;
     ro.noise_sigma = o.noise_sigma;
     ro.threads = 1;
-    const auto full_start = std::chrono::steady_clock::now();
+    const Stopwatch full_start;
     const double full_cpu_start = threadCpuMs();
     RenderedView full = renderView(rc.camera, rc.T_world_cam, scene, ro);
     benchmark::DoNotOptimize(full.bgr.data);
     c.full_cpu_ms = threadCpuMs() - full_cpu_start;
-    c.full_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                          full_start).count();
+    c.full_ms = full_start.ms();
   }
   c.board = toString(o.board);
   c.frames = o.frames;

@@ -1,7 +1,6 @@
 #include "calib/frontal.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -11,6 +10,7 @@
 
 #include "calib/detail/projection.h"
 #include "core/error.h"
+#include "core/stopwatch.h"
 
 namespace previz::calib {
 
@@ -20,10 +20,6 @@ namespace {
   ErrorContext context;
   context.field = field;
   throw Error("frontal: " + field + " " + what, context);
-}
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 }  // namespace
@@ -164,7 +160,7 @@ FrontalResult refineFrontal(const std::function<cv::Mat(size_t)>& image_of,
   out.iterations.push_back(start);
 
   for (int it = 1; it <= options.max_iterations; ++it) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     const IntrinsicsResult& current = out.result;
     std::vector<ViewObservations> next = out.views;
     FrontalIteration round;
@@ -231,7 +227,7 @@ FrontalResult refineFrontal(const std::function<cv::Mat(size_t)>& image_of,
     round.rms_px = refined.rms_px;
     round.points = refined.points_used;
     round.mean_shift_px = shift_count > 0 ? shift_sum / shift_count : 0.0;
-    round.ms = msSince(t0);
+    round.ms = t0.ms();
     out.iterations.push_back(round);
     out.result = std::move(refined);
     out.views = std::move(next);

@@ -21,7 +21,6 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -35,6 +34,7 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::carving {
@@ -59,11 +59,6 @@ std::string num(double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%g", v);
   return buf;
-}
-
-double msSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
 }
 
 }  // namespace
@@ -771,7 +766,7 @@ void buildBricks(HullData& h, const std::vector<Cell>& inside, const std::vector
 }  // namespace
 
 VisualHull Carver::carve(const Silhouettes& silhouettes) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch start;
   Impl& im = *impl_;
   const int n = static_cast<int>(im.cameras.size());
   if (static_cast<int>(silhouettes.masks.size()) != n)
@@ -848,7 +843,7 @@ VisualHull Carver::carve(const Silhouettes& silhouettes) {
   hull.stats.surface_cells = static_cast<long long>(surface.size());
   hull.data = data;
   im.last = data;
-  hull.stats.ms = msSince(start);
+  hull.stats.ms = start.ms();
   return hull;
 }
 

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -17,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::carving {
@@ -344,11 +344,6 @@ std::vector<Witness> makeWitnesses(const Carver& carver, const VisualHull& hull,
   return witnesses;
 }
 
-double msSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
-}
-
 }  // namespace
 
 void RefineOptions::validate() const {
@@ -378,7 +373,7 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
                     const std::vector<Plate>& witness_plates,
                     const std::vector<cv::Mat>& witness_masks, const RefineOptions& options,
                     RefineStats* stats) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch start;
   options.validate();
   RefineStats local;
   const std::vector<Witness> witnesses = makeWitnesses(carver, hull, camera, plate, hull_depth,
@@ -393,7 +388,7 @@ cv::Mat refineDepth(const Carver& carver, const VisualHull& hull, const RigCamer
   local.pixels = n.pixels;
   local.inconsistent = n.inconsistent;
   local.moved = n.moved;
-  local.ms = msSince(start);
+  local.ms = start.ms();
   if (stats) *stats = std::move(local);
   return out;
 }
@@ -517,7 +512,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
                        const std::vector<Plate>& witness_plates,
                        const std::vector<cv::Mat>& witness_masks,
                        const PhotoHullOptions& options, PhotoHullStats* stats) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch start;
   options.validate();
   PhotoHullStats local;
   std::vector<int> index;  // carver camera of each witness used
@@ -552,7 +547,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   std::vector<cv::Mat> witness_hull(nw);
   const int stride = options.witness_stride;
   for (int round = 0; round < options.rounds; ++round) {
-    const auto witness_start = std::chrono::steady_clock::now();
+    const Stopwatch witness_start;
     setDepth(views[nw], out);
     std::vector<cv::Mat> refined(nw);
     local.witness_pixels.assign(nw, 0);
@@ -572,7 +567,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
       local.witness_moved[i] = c.moved;
     }
     for (int i = 0; i < nw; ++i) setDepth(views[i], refined[i]);
-    local.witness_ms += msSince(witness_start);
+    local.witness_ms += witness_start.ms();
     out = hull_depth.clone();
     n = refineView(carver, hull, camera, plate.bgr, main_inv_gain, out, main_refs, options.refine,
                    &options, threads);
@@ -584,7 +579,7 @@ cv::Mat photoHullDepth(const Carver& carver, const VisualHull& hull, const RigCa
   local.depth.inconsistent = n.inconsistent;
   local.depth.moved = n.moved;
   local.free_space = n.free_space;
-  local.ms = local.depth.ms = msSince(start);
+  local.ms = local.depth.ms = start.ms();
   if (stats) *stats = std::move(local);
   return out;
 }

@@ -6,7 +6,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -17,18 +16,13 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::carving {
 namespace fs = std::filesystem;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 // Whole string to int, or nullopt.
 std::optional<int> toInt(const std::string& text) {
@@ -629,14 +623,14 @@ bool CarveJob::finished(int frame) const {
 
 FrameReport CarveJob::runFrame(int frame) {
   Impl& m = *impl_;
-  const Clock::time_point t0 = Clock::now();
+  const Stopwatch t0;
   for (const fs::path& p : outputs(frame)) removeLeftovers(p);
   FrameReport report;
   report.frame = frame;
   report.depth_camera = m.depth_name;
 
   const FrameInputs in = m.readSilhouettes(frame);
-  report.key_ms = msSince(t0);
+  report.key_ms = t0.ms();
   for (size_t i = 0; i < m.input_names.size(); ++i) {
     if (in.dropped[i].empty()) {
       report.cameras_used.push_back(m.input_names[i]);
@@ -660,9 +654,9 @@ FrameReport CarveJob::runFrame(int frame) {
                 c);
   }
 
-  const Clock::time_point t1 = Clock::now();
+  const Stopwatch t1;
   const VisualHull hull = m.carve(frame, in);
-  report.carve_ms = msSince(t1);
+  report.carve_ms = t1.ms();
   report.surface_cells = static_cast<long long>(hull.surface.size());
   report.inside_cells = static_cast<long long>(hull.inside.size());
   for (long long c : hull.stats.cells_tested) report.cells_tested += c;
@@ -670,15 +664,15 @@ FrameReport CarveJob::runFrame(int frame) {
   for (const HullCell& c : hull.inside) report.volume_m3 += v0 * std::pow(8.0, c.level);
   report.volume_m3 += 0.5 * v0 * static_cast<double>(hull.surface.size());
 
-  const Clock::time_point t2 = Clock::now();
+  const Stopwatch t2;
   if (!m.depth_name.empty()) m.writeDepth(frame, hull, in, report);
-  report.depth_ms = msSince(t2);
+  report.depth_ms = t2.ms();
 
   // Geometry for post.
-  const Clock::time_point t3 = Clock::now();
+  const Stopwatch t3;
   const TriangleMesh mesh = m.carver->mesh(hull);
-  report.mesh_ms = msSince(t3);
-  const Clock::time_point t4 = Clock::now();
+  report.mesh_ms = t3.ms();
+  const Stopwatch t4;
   writePly(mesh, m.path("mesh", frame, ".ply"));
   writeObj(mesh, m.path("mesh", frame, ".obj"));
   if (m.options.write_points) {
@@ -689,8 +683,8 @@ FrameReport CarveJob::runFrame(int frame) {
   }
   report.mesh_vertices = static_cast<long long>(mesh.vertices.size());
   report.mesh_faces = static_cast<long long>(mesh.faces.size());
-  report.export_ms = msSince(t4);
-  report.total_ms = msSince(t0);
+  report.export_ms = t4.ms();
+  report.total_ms = t0.ms();
 
   // The report last: its presence (with the same config) marks the frame finished.
   nlohmann::json line = report.toJson();
@@ -700,7 +694,7 @@ FrameReport CarveJob::runFrame(int frame) {
 }
 
 RunSummary CarveJob::run(const std::function<void(int, int)>& progress) {
-  const Clock::time_point t0 = Clock::now();
+  const Stopwatch t0;
   RunSummary summary;
   summary.selected = selectedFrames();
   std::vector<int> to_carve;
@@ -727,7 +721,7 @@ RunSummary CarveJob::run(const std::function<void(int, int)>& progress) {
     }
   }
   writeFileAtomic(impl_->options.out / "carve.jsonl", lines);
-  summary.ms = msSince(t0);
+  summary.ms = t0.ms();
   return summary;
 }
 

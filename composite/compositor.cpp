@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -15,12 +14,12 @@
 
 #include "core/error.h"
 #include "core/srgb.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::composite {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
 // Linear [0, 1] in 65536 steps -> 8-bit sRGB code, rounded as the renderer rounds. The step
@@ -173,7 +172,7 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
 
 void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool debug_layers,
                            const std::string& source) const {
-  const Clock::time_point start = Clock::now();
+  const Stopwatch start;
   const cv::Size lens_size(lens_.width, lens_.height), cg_size(cg_.width, cg_.height);
   checkInput(in.foreground, CV_8UC3, lens_size, "foreground", source);
   checkInput(in.alpha, CV_32FC1, lens_size, "alpha", source);
@@ -329,7 +328,7 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
   r.stats.cg_front_px = cg_front;
   r.stats.edge_filled_px = filled;
   r.stats.fallback_px = fallback;
-  r.stats.ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  r.stats.ms = start.ms();
 }
 
 cv::Mat depthPreview(const cv::Mat& depth_m, double near_m, double far_m) {

@@ -1,7 +1,6 @@
 #include "datasets/synth.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -18,6 +17,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/rig.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 #include "datasets/detail/board_view.h"
 #include "datasets/random.h"
@@ -30,7 +30,6 @@
 namespace previz::synth {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
 constexpr int kTakeFormatVersion = 1;
@@ -64,10 +63,6 @@ std::string frameFile(int frame, const char* extension) {
   char name[32];
   std::snprintf(name, sizeof(name), "%06d.%s", frame, extension);
   return name;
-}
-
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
 // The instants a frame's shutter averages: 'count' times centred on the frame time, spread over
@@ -177,9 +172,9 @@ void renderBoardFrame(const BoardFrames& source, const std::vector<TakeCamera>& 
   for (int i = 0; i < n; ++i) {
     try {
       const std::string& name = cameras[i].rig.camera.name;
-      const Clock::time_point start = Clock::now();
+      const Stopwatch start;
       const cv::Mat plate = source.render(i, f);
-      ms[i] = msSince(start);
+      ms[i] = start.ms();
       writeImageAtomic(out / "cams" / name / frameFile(f, "png"), plate);
       nlohmann::json points = nlohmann::json::array();
       for (const BoardObservation& b : source.truth(i, f)) {
@@ -324,7 +319,7 @@ void SynthOptions::validate() const {
 SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
                             const std::function<void(const SynthProgress&)>& progress) {
   options.validate();
-  const Clock::time_point take_start = Clock::now();
+  const Stopwatch take_start;
   const SynthOptions& o = options;
   const bool studio_preset = o.preset == Preset::kStudio;
   const bool board_preset = !studio_preset;
@@ -507,9 +502,9 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       if (c.moving) continue;
       RenderOptions ro = plateOptions(c, -1);
       ro.truth = false;
-      const Clock::time_point start = Clock::now();
+      const Stopwatch start;
       const RenderedView view = renderView(c.rig.camera, c.rig.T_world_cam, empty, ro);
-      render_ms += msSince(start);
+      render_ms += start.ms();
       writeImageAtomic(out / "clean" / (c.rig.camera.name + ".png"), view.bgr);
     }
   }
@@ -534,7 +529,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
         SynthProgress p;
         p.frames_done = f + 1;
         p.frames_total = o.frames;
-        p.elapsed_s = msSince(take_start) / 1000.0;
+        p.elapsed_s = take_start.seconds();
         progress(p);
       }
       continue;
@@ -576,7 +571,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       if (f < perCamera(o.late_frames, name)) continue;  // not recording yet
       RenderOptions ro = plateOptions(c, f);
       ro.keep_encoded = keep_encoded;
-      const Clock::time_point start = Clock::now();
+      const Stopwatch start;
       RenderedView view;
       if (delay == 0) {
         const ShutterSample centre{&centre_scene, poseAt(c, t)};
@@ -596,7 +591,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
         }
         view = renderView(c.rig.camera, shutter, {&shifted, poseAt(c, t + shift_s)}, ro);
       }
-      const double ms = msSince(start);
+      const double ms = start.ms();
       plate_ms += ms;
       render_ms += ms;
       writers.at(name).write(view.bgr, view.encoded);
@@ -619,11 +614,11 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       if (!single_instant) {
         for (double ti : times) cg_scenes.push_back(studio.sceneAt(ti, kLayerCg));
       }
-      Clock::time_point start = Clock::now();
+      Stopwatch start;
       const LinearView cg =
           renderLinear(cg_camera, shutterFor(*main_camera, cg_scenes, cg_centre),
                        {&cg_centre, poseAt(*main_camera, t)}, o.samples_per_pixel, o.threads);
-      render_ms += msSince(start);
+      render_ms += start.ms();
       ExrImage color;
       color.image = cg.rgb;
       color.channels = {"R", "G", "B"};
@@ -651,11 +646,11 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       ro.gain = main_camera->gain;
       ro.truth = false;
       ro.threads = o.threads;
-      start = Clock::now();
+      start.restart();
       const RenderedView comp =
           renderView(main_camera->rig.camera, shutterFor(*main_camera, comp_scenes, comp_centre),
                      {&comp_centre, poseAt(*main_camera, t)}, ro);
-      render_ms += msSince(start);
+      render_ms += start.ms();
       writeImageAtomic(out / "truth" / "composite" / png, comp.bgr);
 
       if (config.with_prop) {
@@ -678,7 +673,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       SynthProgress p;
       p.frames_done = f + 1;
       p.frames_total = o.frames;
-      p.elapsed_s = msSince(take_start) / 1000.0;
+      p.elapsed_s = take_start.seconds();
       progress(p);
     }
   }

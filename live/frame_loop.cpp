@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
@@ -15,12 +14,11 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/pose.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 
 namespace previz::live {
 namespace {
-
-using Clock = std::chrono::steady_clock;
 
 Error frameError(const std::string& stage, int frame, const std::exception& e) {
   ErrorContext c;
@@ -303,14 +301,14 @@ double processCpuMs() {
 std::vector<StageTime> FrameLoop::run(FrameState& state) {
   std::vector<StageTime> times;
   for (auto& [name, fn] : impl_->stages) {
-    const Clock::time_point start = Clock::now();
+    const Stopwatch start;
     const double cpu0 = processCpuMs();
     try {
       fn(state);
     } catch (const std::exception& e) {
       throw frameError(name, state.frame, e);
     }
-    times.push_back({name, std::chrono::duration<double, std::milli>(Clock::now() - start).count(),
+    times.push_back({name, start.ms(),
                      processCpuMs() - cpu0});
   }
   return times;

@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
@@ -155,12 +154,12 @@ LiveReader::~LiveReader() = default;
 
 bool LiveReader::next(FrameState& s) {
   if (!started_) {
-    start_ = std::chrono::steady_clock::now();
+    since_start_.restart();
     started_ = true;
   }
   if (options_.pace) {
     // The frame the cameras are at now; the ones in between are dropped (grabbed, not decoded).
-    const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const double elapsed_s = since_start_.seconds();
     const int now_frame = static_cast<int>(elapsed_s * fps_);
     while (next_frame_ < now_frame) {
       for (auto& src : sources_)

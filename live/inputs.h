@@ -2,7 +2,6 @@
 // Where a live frame's inputs come from (live/frame_loop.h runs the frame): a take folder
 // (TakeReader: plates, main camera pose and lens, CG frame) or live sources read in lock step
 // (LiveReader: VideoCapture devices, files, streams; take/live.h).
-#include <chrono>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -14,6 +13,7 @@
 #include "core/camera.h"
 #include "core/pose.h"
 #include "core/rig.h"
+#include "core/stopwatch.h"
 #include "live/frame_loop.h"
 #include "live/tracker.h"
 #include "take/live.h"
@@ -95,7 +95,7 @@ class LiveReader {
   LiveOptions options_;
   double fps_ = 24;
   int next_frame_ = 0, delivered_ = 0, dropped_ = 0;
-  std::chrono::steady_clock::time_point start_;
+  Stopwatch since_start_;  // restarted at the first frame
   bool started_ = false;
 };
 

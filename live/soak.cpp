@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -19,6 +18,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/stats.h"
+#include "core/stopwatch.h"
 #include "core/write_fault.h"
 #include "live/inputs.h"
 #include "take/take.h"
@@ -26,13 +26,10 @@
 namespace previz::live {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
 constexpr int kLateFrames = 2;  // camera_late: the witness shows the frame this many before
-
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
 // q-quantile by rank (q = 0.5: the upper median, as bench run reports it; 0.99: p99).
 // CPU time of the process (every thread), ms.
@@ -302,7 +299,7 @@ std::string SoakReport::fullReport() const {
 
 SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProgress&)>& progress) {
   o.validate();
-  const Clock::time_point t_start = Clock::now();
+  const Stopwatch t_start;
   SoakReport r;
   r.take = o.take.string();
   r.max_rss_growth = o.max_rss_growth;
@@ -436,7 +433,7 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
           stamp[std::find(witnesses.begin(), witnesses.end(), f->camera) - witnesses.begin()] = n - kLateFrames;
       }
       disk_full = faultAt(r.faults, "disk_full", n) != nullptr;
-      const Clock::time_point t0 = Clock::now();
+      const Stopwatch t0;
       const double c0 = cpuMs();
       try {
         reader.read(t, s);
@@ -444,10 +441,10 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
         failed = true;
         fail_reason[n] = e.what();
       }
-      ms += msSince(t0);
+      ms += t0.ms();
       cpu_ms += cpuMs() - c0;
     }
-    const Clock::time_point t1 = Clock::now();
+    const Stopwatch t1;
     const double c1 = cpuMs();
     if (!failed) {
       // A plate stamped with another frame than the frame set's (a camera out of sync) is not
@@ -498,7 +495,7 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
       }
       for (const SoakEvent& e : skips[n]) r.skipped_writes.push_back(e);
     }
-    ms += msSince(t1);
+    ms += t1.ms();
     cpu_ms += cpuMs() - c1;
     SoakFrame log;
     log.frame = n;
@@ -672,7 +669,7 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
     if (e.is_regular_file() && !written.count(e.path()))
       r.output_problems.push_back("left in the output folder: " + e.path().string());
 
-  r.wall_s = msSince(t_start) / 1000.0;
+  r.wall_s = t_start.seconds();
   writeJsonAtomic(o.out / "soak.json", r.toJson(true));
   writeSoakPlot(r, o.out / "soak.svg");
   return r;

@@ -2,7 +2,6 @@
 #include "live/tracker_align.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -13,6 +12,7 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "core/error.h"
+#include "core/stopwatch.h"
 #include "core/units.h"
 
 namespace previz::live {
@@ -196,7 +196,7 @@ void TrackerAlignOptions::validate() const {
 TrackerAlignResult alignTracker(const std::vector<BoardView>& views, const Camera& cam,
                                 const std::vector<AlignSample>& samples, const TrackerAlignOptions& o) {
   o.validate();
-  const auto t_start = std::chrono::steady_clock::now();
+  const Stopwatch t_start;
   if (samples.size() < 2) throw Error("tracker align: fewer than 2 tracker samples", fieldContext("--tracker-log"));
   Track track;
   for (const AlignSample& s : samples) {
@@ -345,7 +345,7 @@ TrackerAlignResult alignTracker(const std::vector<BoardView>& views, const Camer
     result.covariance_ok = true;
   }
   delete problem;
-  result.solve_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+  result.solve_ms = t_start.ms();
   return result;
 }
 

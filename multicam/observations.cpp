@@ -5,7 +5,6 @@
 #include <omp.h>
 
 #include <atomic>
-#include <chrono>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -13,6 +12,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 #include "take/take.h"
 
@@ -307,7 +307,7 @@ RigObservations detectTake(const fs::path& take, const std::vector<std::string>&
   std::vector<ItemResult> results(items.size());
   const int total = static_cast<int>(items.size());
   std::atomic<int> done{0};
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch start;
   std::string progress_error;
   const int threads = resolveThreads(options.threads);
 
@@ -336,7 +336,7 @@ RigObservations detectTake(const fs::path& take, const std::vector<std::string>&
           DetectProgress p;
           p.images_done = now;
           p.images_total = total;
-          p.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+          p.elapsed_s = start.seconds();
           progress(p);
         } catch (const std::exception& e) {
           if (progress_error.empty()) progress_error = e.what();

@@ -1,13 +1,13 @@
 #include "multicam/pipeline.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/stopwatch.h"
 
 namespace previz::multicam {
 namespace fs = std::filesystem;
@@ -127,10 +127,10 @@ TakeDetections detectRigTake(const RigTake& take, const DetectTakeOptions& detec
       out.log.push_back("cannot use " + cache.string() + " (" + e.what() + "); detecting again");
     }
   }
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch start;
   out.observations =
       detectTake(take.take, take.cameras, take.board, take.floor ? &*take.floor : nullptr, detect, progress);
-  out.detect_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  out.detect_s = start.seconds();
   if (!cache.empty()) {
     nlohmann::json j = observationsToJson(out.observations);
     j["cache_key"] = key;

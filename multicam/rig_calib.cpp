@@ -1,7 +1,6 @@
 #include "multicam/rig_calib.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -14,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/stats.h"
+#include "core/stopwatch.h"
 #include "core/units.h"
 #include "multicam/detail/bundle.h"
 #include "multicam/detail/views.h"
@@ -27,7 +27,6 @@ using detail::BundleCamera;
 using detail::BundlePoint;
 using detail::BundleProblem;
 using detail::View;
-using Clock = std::chrono::steady_clock;
 using ViewsByCamera = std::vector<std::map<int, View>>;
 
 constexpr double kRadToDeg = degrees(1.0);
@@ -472,7 +471,7 @@ void RigCalibOptions::validate() const {
 
 RigCalibResult calibrateRig(const RigObservations& obs, const Rig& initial,
                             const RigCalibOptions& options) {
-  const Clock::time_point start = Clock::now();
+  const Stopwatch start;
   options.validate();
   initial.validate();
   const int n = static_cast<int>(initial.cameras.size());
@@ -549,7 +548,7 @@ RigCalibResult calibrateRig(const RigObservations& obs, const Rig& initial,
   result.rms_px = result.residuals > 0 ? std::sqrt(ssr / result.residuals) : 0.0;
   for (size_t j = 0; j < problem.boards.size(); ++j)
     if (board_used[j]) result.T_world_board[board_frame[j]] = problem.boards[j].T_world_board;
-  result.solve_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  result.solve_ms = start.ms();
   return result;
 }
 

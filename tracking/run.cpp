@@ -2,7 +2,6 @@
 #include "tracking/run.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -12,6 +11,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/stats.h"
+#include "core/stopwatch.h"
 #include "core/units.h"
 #include "take/take.h"
 
@@ -20,10 +20,6 @@ namespace fs = std::filesystem;
 namespace previz::tracking {
 
 namespace {
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 double maxOf(const std::vector<double>& v) { return v.empty() ? 0 : *std::max_element(v.begin(), v.end()); }
 
@@ -83,7 +79,7 @@ std::map<int, std::map<int, Pose>> readPropTruth(const fs::path& path) {
 TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
                          const std::function<void(int, int)>& progress) {
   o.validate();
-  const auto t0 = std::chrono::steady_clock::now();
+  const Stopwatch t0;
   const Rig rig = readRig(in.rig);
   const PropSet props = readProps(in.props);
   std::vector<RigCamera> cams;
@@ -192,9 +188,9 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
       if (progress) progress(static_cast<int>(i + 1), static_cast<int>(frames.size()));
       continue;
     }
-    const auto t_track = std::chrono::steady_clock::now();
+    const Stopwatch t_track;
     const TrackFrame r = tracker.track(f, f / fps, images);
-    s.track_ms += msSince(t_track);
+    s.track_ms += t_track.ms();
     if (streamer) streamer->send(r);
     if (o.frame_files) writeFileAtomic(frame_file, trackFrameToJson(r).dump() + "\n");
     else lines += trackFrameToJson(r).dump() + "\n";
@@ -248,14 +244,14 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     s.poses = o.out / "poses.jsonl";
     writeFileAtomic(s.poses, lines);
   }
-  s.ms = msSince(t0);
+  s.ms = t0.ms();
   return s;
 }
 
 CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOptions& o,
                                   const std::function<void(int, int)>& progress) {
   o.validate();
-  const auto t0 = std::chrono::steady_clock::now();
+  const Stopwatch t0;
   const Rig rig = readRig(in.rig);
   const RigCamera& rc = rig.at(in.camera);
   const PropSet set = readProps(in.tags);
@@ -374,7 +370,7 @@ CameraTrackSummary runTrackCamera(const CameraTrackInput& in, const TrackRunOpti
   s.max_rotation_error_deg = maxOf(rot);
   s.poses = o.out / "camera_poses.jsonl";
   writeFileAtomic(s.poses, lines);
-  s.ms = msSince(t0);
+  s.ms = t0.ms();
   return s;
 }
 

@@ -2,23 +2,19 @@
 #include "tracking/tracker.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include <nlohmann/json.hpp>
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/stopwatch.h"
 #include "core/threads.h"
 #include "core/units.h"
 
 namespace previz::tracking {
 
 namespace {
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 }  // namespace
 
@@ -152,7 +148,7 @@ void PropTracker::reset() {
 
 TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Mat>& images) {
   Impl& m = *impl_;
-  const auto t_start = std::chrono::steady_clock::now();
+  const Stopwatch t_start;
   const int n_cams = static_cast<int>(m.cameras.size());
   if (static_cast<int>(images.size()) != n_cams)
     throw Error("track: " + std::to_string(images.size()) + " images for " + std::to_string(n_cams) +
@@ -213,13 +209,13 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
       s.failure = e.what();
     }
   };
-  const auto t_detect = std::chrono::steady_clock::now();
+  const Stopwatch t_detect;
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
   for (int c = 0; c < n_cams; ++c) search(c, whole[static_cast<size_t>(c)] != 0);
-  out.detect_ms = msSince(t_detect);
+  out.detect_ms = t_detect.ms();
 
   // Tags -> props.
-  const auto t_solve = std::chrono::steady_clock::now();
+  const Stopwatch t_solve;
   std::vector<std::vector<TagObservation>> obs;
   const auto observe = [&] {
     obs.assign(m.props.props.size(), {});
@@ -276,10 +272,10 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
   if (rescan.empty()) {
     std::fill(again.begin(), again.end(), 0);  // nothing new to solve from: those props are lost
   } else {
-    const auto t_again = std::chrono::steady_clock::now();
+    const Stopwatch t_again;
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (int i = 0; i < static_cast<int>(rescan.size()); ++i) search(rescan[static_cast<size_t>(i)], true);
-    rescan_ms = msSince(t_again);
+    rescan_ms = t_again.ms();
     out.detect_ms += rescan_ms;
     out.rescanned_cameras = static_cast<int>(rescan.size());
     out.full_frame = std::all_of(out.search.begin(), out.search.end(),
@@ -312,8 +308,8 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
     }
     out.props.push_back(std::move(r));
   }
-  out.solve_ms = msSince(t_solve) - rescan_ms;
-  out.total_ms = msSince(t_start);
+  out.solve_ms = t_solve.ms() - rescan_ms;
+  out.total_ms = t_start.ms();
   return out;
 }
 

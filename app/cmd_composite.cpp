@@ -15,6 +15,7 @@
 #include "composite/output.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 
 namespace previz::app {
@@ -28,12 +29,6 @@ struct CompositeArgs {
   int edge_fill_px = 3, threads = 0;
   bool layers = false, exr = false, json = false, quiet = false;
 };
-
-std::string stem(int frame) {
-  char s[32];
-  std::snprintf(s, sizeof(s), "%06d", frame);
-  return s;
-}
 
 int runComposite(const CompositeArgs& a) {
   carving::TakeSource src;
@@ -101,7 +96,7 @@ int runComposite(const CompositeArgs& a) {
     if (a.depth.empty()) {
       in.actor_depth = cv::Mat(lens.height, lens.width, CV_32FC1, cv::Scalar(std::numeric_limits<float>::infinity()));
     } else {
-      in.actor_depth = readDepthExr(fs::path(a.depth) / (stem(f) + ".exr"));
+      in.actor_depth = readDepthExr(fs::path(a.depth) / (frameStem(f) + ".exr"));
     }
     const composite::CgFrame cg = composite::readCgFrame(cg_dir, f, cv::Size(compositor.cg().width, compositor.cg().height));
     in.cg_color = cg.color;

@@ -20,6 +20,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/names.h"
 #include "core/threads.h"
 #include "core/units.h"
 #include "live/frame_loop.h"
@@ -118,23 +119,22 @@ cv::Mat labelled(const cv::Mat& bgr, const std::string& text, cv::Size tile) {
 
 // One row per view: every camera's plate, then the main camera's truth layers.
 cv::Mat contactSheet(const fs::path& take, const Rig& rig, int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d", frame);
+  const std::string name = frameStem(frame);
   const cv::Size tile(384, 216);
   std::vector<cv::Mat> tiles;
   for (const RigCamera& rc : rig.cameras) {
     const std::string& cam = rc.camera.name;
-    tiles.push_back(labelled(readImage(take / "cams" / cam / (std::string(name) + ".png"), cv::IMREAD_COLOR),
+    tiles.push_back(labelled(readImage(take / "cams" / cam / (name + ".png"), cv::IMREAD_COLOR),
                              cam + " plate", tile));
   }
   const fs::path truth = take / "truth";
-  tiles.push_back(labelled(depthPreview(readDepthExr(truth / "depth" / "main" / (std::string(name) + ".exr"))),
+  tiles.push_back(labelled(depthPreview(readDepthExr(truth / "depth" / "main" / (name + ".exr"))),
                            "main depth (truth)", tile));
-  cv::Mat mask = readImage(truth / "masks" / "main" / (std::string(name) + ".png"), cv::IMREAD_GRAYSCALE);
+  cv::Mat mask = readImage(truth / "masks" / "main" / (name + ".png"), cv::IMREAD_GRAYSCALE);
   cv::Mat mask_bgr;
   cv::cvtColor(mask, mask_bgr, cv::COLOR_GRAY2BGR);
   tiles.push_back(labelled(mask_bgr, "main actor mask (truth)", tile));
-  tiles.push_back(labelled(readImage(truth / "composite" / (std::string(name) + ".png"), cv::IMREAD_COLOR),
+  tiles.push_back(labelled(readImage(truth / "composite" / (name + ".png"), cv::IMREAD_COLOR),
                            "true composite (target)", tile));
   const int cols = 4;
   const int rows = (static_cast<int>(tiles.size()) + cols - 1) / cols;
@@ -144,12 +144,6 @@ cv::Mat contactSheet(const fs::path& take, const Rig& rig, int frame) {
     tiles[i].copyTo(sheet(cv::Rect(c * tile.width, r * tile.height, tile.width, tile.height)));
   }
   return sheet;
-}
-
-std::string stem(int frame) {
-  char s[32];
-  std::snprintf(s, sizeof(s), "%06d", frame);
-  return s;
 }
 
 // One camera's intrinsics as the demo calibrated them, against the take's truth.
@@ -205,7 +199,7 @@ std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, con
     calib::ImageSet images;
     images.source = (take / "cams" / name).string();
     images.count = o.frames;
-    images.name = [&](int f) { return (take / "cams" / name / (stem(f) + ".png")).string(); };
+    images.name = [&](int f) { return (take / "cams" / name / (frameStem(f) + ".png")).string(); };
     images.read = [&](int f) { return readImage(images.name(f), cv::IMREAD_COLOR); };
     const calib::PipelineResult run = calib::calibratePipeline(images, board, pipeline);  // throws naming views
     CameraCalib c;
@@ -373,8 +367,8 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
         r.prop_err_deg.push_back(rotationDistance(p.T_world_prop, T) * 180 / 3.14159265358979323846);
       }
     }
-    const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (stem(f) + ".png"), cv::IMREAD_COLOR);
-    const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (stem(f) + ".png"), cv::IMREAD_GRAYSCALE);
+    const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (frameStem(f) + ".png"), cv::IMREAD_COLOR);
+    const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (frameStem(f) + ".png"), cv::IMREAD_GRAYSCALE);
     r.psnr_db.push_back(composite::actorPsnr(s.composite.bgr, truth, mask).psnr_db);
     r.min_psnr_db = std::min(r.min_psnr_db, r.psnr_db.back());
     r.mean_psnr_db += r.psnr_db.back();
@@ -528,7 +522,7 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
     << (calibrated ? "composite with the true rig &middot; " : "") << "true composite &middot; actor depth used "
        "(turbo, 2&ndash;12 m) &middot; in front: green actor, red CG, magenta fallback (no depth)</p>\n";
   for (size_t i = 0; i < frames.size(); ++i) {
-    const std::string st = stem(frames[i]);
+    const std::string st = frameStem(frames[i]);
     h << "<div class=\"row\">"
       << "<div><img src=\"" << shown_dir << "/composite/" << st << ".png\">frame " << frames[i] << ", "
       << num(shown.psnr_db[i], 2) << " dB</div>";

@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "app/commands.h"
+#include "core/names.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
 #include "live/frame_loop.h"
@@ -60,12 +61,6 @@ using live::kLiveVoxelM;
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string stem(int frame) {
-  char s[32];
-  std::snprintf(s, sizeof(s), "%06d", frame);
-  return s;
-}
 
 // Loop options shared by run and bench run.
 struct LoopArgs {
@@ -348,10 +343,10 @@ int runRun(const RunArgs& a) {
     }
     const Stopwatch w0;
     writer.write(f, s.composite);
-    writeDepthExr(out / "depth" / (stem(f) + ".exr"), s.main_depth,
+    writeDepthExr(out / "depth" / (frameStem(f) + ".exr"), s.main_depth,
                   {{"previz:camera", main}, {"previz:frame", std::to_string(f)},
                    {"previz:source", "visual hull (previz run)"}});
-    if (a.meshes) writePly(l.loop->carver().mesh(s.hull), out / "mesh" / (stem(f) + ".ply"));
+    if (a.meshes) writePly(l.loop->carver().mesh(s.hull), out / "mesh" / (frameStem(f) + ".ply"));
     const double write_ms = w0.ms();
     times.insert(times.begin(), StageTime{"read", read_ms});
     times.push_back(StageTime{"write", write_ms});
@@ -536,7 +531,7 @@ class BenchQuality {
   void add(const FrameState& s) {
     if (!exact_) return;
     const fs::path truth = take_dir_ / "truth";
-    const std::string stem = batch::frameStem(s.frame) + ".png";
+    const std::string stem = frameStem(s.frame) + ".png";
     const std::vector<std::string>& names = loop_.carveCameras();
     for (size_t i = 0; i < names.size() && i < s.silhouettes.size(); ++i) {
       const fs::path path = truth / "labels" / names[i] / stem;

@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
+#include "core/names.h"
 #include "core/pose_lines.h"
 #include "core/rig.h"
 #include "core/text.h"

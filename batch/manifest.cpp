@@ -11,6 +11,7 @@
 #include "batch/hash.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "take/take.h"
 
@@ -110,12 +111,6 @@ StagePlan trackStage(const Manifest& m, const TakePlan& take) {
 }
 
 }  // namespace
-
-std::string frameStem(int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d", frame);
-  return name;
-}
 
 void PlanOptions::validate() const {
   if (takes.empty()) throw Error("batch plan: at least one take is needed", fieldContext("--takes"));

@@ -111,7 +111,4 @@ std::vector<InputChange> changedInputs(const Manifest& manifest, const TakePlan*
 // Throws Error naming the first changed file (and how many more) unless nothing changed.
 void requireUnchangedInputs(const Manifest& manifest, const TakePlan* take = nullptr);
 
-// frame -> "%06d"
-std::string frameStem(int frame);
-
 }  // namespace previz::batch

@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/mesh.h"
+#include "core/names.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
 
@@ -37,12 +38,6 @@ std::optional<int> toInt(const std::string& text) {
   } catch (const std::exception&) {
     return std::nullopt;
   }
-}
-
-std::string frameStem(int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d", frame);
-  return name;
 }
 
 // Temporaries that an interrupted writer left beside an output (core/io.h names them

@@ -13,6 +13,7 @@
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/pose_lines.h"
 
 namespace previz::carving {
@@ -27,15 +28,9 @@ ErrorContext context(const fs::path& file, const std::string& field = {}) {
   return c;
 }
 
-std::string frameName(int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d.png", frame);
-  return name;
-}
-
 // Frame numbers of the %06d.png mattes in a folder.
 void collectMaskFrames(const fs::path& dir, std::set<int>& frames) {
-  static const take::SequencePattern kMasks = *take::parsePattern("%06d.png");
+  static const take::SequencePattern kMasks = *take::parsePattern(std::string(kFramePattern) + ".png");
   for (long long f : take::framesOf(dir, kMasks)) frames.insert(static_cast<int>(f));
 }
 
@@ -169,7 +164,7 @@ std::string Take::source(const std::string& camera, int frame) const {
 }
 
 fs::path Take::maskPath(const std::string& camera, int frame) const {
-  return source_.masks_dir / camera / frameName(frame);
+  return source_.masks_dir / camera / (frameStem(frame) + ".png");
 }
 
 cv::Mat Take::cleanPlate(const std::string& camera) const {

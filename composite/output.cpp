@@ -10,18 +10,13 @@
 #include "composite/detail/video_plugin.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/plugin.h"
 #include "core/rig.h"
 
 namespace previz::composite {
 namespace fs = std::filesystem;
 namespace {
-
-std::string stem(int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d", frame);
-  return name;
-}
 
 ErrorContext fileFrame(const fs::path& file, int frame) {
   ErrorContext c;
@@ -53,8 +48,8 @@ Camera readCgCamera(const fs::path& camera_json) {
 }
 
 CgFrame readCgFrame(const fs::path& cg_dir, int frame, cv::Size expected) {
-  const fs::path color_path = cg_dir / "color" / (stem(frame) + ".exr");
-  const fs::path depth_path = cg_dir / "depth" / (stem(frame) + ".exr");
+  const fs::path color_path = cg_dir / "color" / (frameStem(frame) + ".exr");
+  const fs::path depth_path = cg_dir / "depth" / (frameStem(frame) + ".exr");
   CgFrame out;
   const auto withFrame = [&](const fs::path& path, auto&& fn) {
     try {
@@ -145,7 +140,7 @@ const OutputOptions& CompositeWriter::options() const { return impl_->options; }
 
 std::vector<fs::path> CompositeWriter::outputs(int frame) const {
   const OutputOptions& o = impl_->options;
-  const std::string s = stem(frame);
+  const std::string s = frameStem(frame);
   std::vector<fs::path> p;
   if (o.png) p.push_back(o.out / "composite" / (s + ".png"));
   if (o.exr) p.push_back(o.out / "composite" / (s + ".exr"));
@@ -160,7 +155,7 @@ std::vector<fs::path> CompositeWriter::outputs(int frame) const {
 
 void CompositeWriter::write(int frame, const CompositeResult& r) {
   const OutputOptions& o = impl_->options;
-  const std::string s = stem(frame);
+  const std::string s = frameStem(frame);
   const std::map<std::string, std::string> attrs = {{"previz:frame", std::to_string(frame)},
                                                     {"previz:pixel_origin", kPixelOrigin}};
   if (o.png) writeImageAtomic(o.out / "composite" / (s + ".png"), r.bgr);

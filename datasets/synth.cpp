@@ -16,6 +16,7 @@
 #include "core/distortion_maps.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
@@ -57,12 +58,6 @@ BoardType boardTypeFromString(const std::string& name) {
   if (name == "circles") return BoardType::kCircles;
   if (name == "quadtree") return BoardType::kQuadtree;
   badOption("board", "must be chessboard|charuco|aprilgrid|circles|quadtree (got '" + name + "')");
-}
-
-std::string frameFile(int frame, const char* extension) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%06d.%s", frame, extension);
-  return name;
 }
 
 // The instants a frame's shutter averages: 'count' times centred on the frame time, spread over
@@ -175,7 +170,7 @@ void renderBoardFrame(const BoardFrames& source, const std::vector<TakeCamera>& 
       const Stopwatch start;
       const cv::Mat plate = source.render(i, f);
       ms[i] = start.ms();
-      writeImageAtomic(out / "cams" / name / frameFile(f, "png"), plate);
+      writeImageAtomic(out / "cams" / name / (frameStem(f) + ".png"), plate);
       nlohmann::json points = nlohmann::json::array();
       for (const BoardObservation& b : source.truth(i, f)) {
         points.push_back({{"id", b.id}, {"x", b.px.x()}, {"y", b.px.y()}});
@@ -535,8 +530,8 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       continue;
     }
     const std::vector<double> times = shutterTimes(t, o);
-    const std::string png = frameFile(f, "png");
-    const std::string exr = frameFile(f, "exr");
+    const std::string png = frameStem(f) + ".png";
+    const std::string exr = frameStem(f) + ".exr";
 
     // Scenes of this frame: plate (what the cameras film) at every shutter instant plus the
     // frame time itself (truth layers).
@@ -662,10 +657,9 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
       }
       if (o.write_meshes && config.with_actor) {
         const TriangleMesh mesh = studio.actorMesh(t);
-        char stem[32];
-        std::snprintf(stem, sizeof(stem), "actor.%06d", f);
-        writePly(mesh, out / "truth" / "mesh" / (std::string(stem) + ".ply"));
-        writeObj(mesh, out / "truth" / "mesh" / (std::string(stem) + ".obj"));
+        const std::string stem = "actor." + frameStem(f);
+        writePly(mesh, out / "truth" / "mesh" / (stem + ".ply"));
+        writeObj(mesh, out / "truth" / "mesh" / (stem + ".obj"));
       }
     }
 
@@ -728,7 +722,7 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
                          {"seed", o.seed},
                          {"fps", o.fps},
                          {"frames", o.frames},
-                         {"frame_pattern", "%06d"},
+                         {"frame_pattern", kFramePattern},
                          {"duration_s", duration_s},
                          {"choreography_duration_s", config.take_duration_s},
                          {"cameras", names},

@@ -17,6 +17,7 @@
 #include "composite/output.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/stats.h"
 #include "core/stopwatch.h"
 #include "core/write_fault.h"
@@ -51,12 +52,6 @@ std::uint64_t fnv1a(const std::string& bytes) {
   std::uint64_t h = 0xcbf29ce484222325ull;
   for (unsigned char c : bytes) h = (h ^ c) * 0x100000001b3ull;
   return h;
-}
-
-std::string slotStem(int slot) {
-  char s[32];
-  std::snprintf(s, sizeof(s), "%06d", slot);
-  return s;
 }
 
 ErrorContext frameContext(const std::string& file, const std::string& camera, int frame) {
@@ -478,8 +473,8 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
       // Outputs as `previz run` writes them, into the ring; a failed write is reported and the
       // loop goes on.
       const int slot = n % o.output_slots;
-      const fs::path png = frames_dir / "composite" / (slotStem(slot) + ".png");
-      const fs::path exr = frames_dir / "depth" / (slotStem(slot) + ".exr");
+      const fs::path png = frames_dir / "composite" / (frameStem(slot) + ".png");
+      const fs::path exr = frames_dir / "depth" / (frameStem(slot) + ".exr");
       try {
         writer.write(slot, s.composite);
         written[png] = {n, fnv1a(readTextFile(png))};

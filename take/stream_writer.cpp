@@ -5,6 +5,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/srgb.h"
 #include "take/detail/files.h"
 #include "take/sequence.h"
@@ -106,7 +107,7 @@ StreamWriter::StreamWriter(const fs::path& take_dir, const std::string& camera, 
     m.video = std::make_unique<VideoWriter>(m.video_path, size, vo);
   } else {
     const std::string text =
-        detail::replaceAll(options.pattern.empty() ? std::string("%06d") : options.pattern, "{camera}", camera) +
+        detail::replaceAll(options.pattern.empty() ? std::string(kFramePattern) : options.pattern, "{camera}", camera) +
         extensionOf(options.format);
     m.pattern = *parsePattern(text);
     m.dir = take_dir / "cams" / camera;

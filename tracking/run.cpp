@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/stats.h"
 #include "core/stopwatch.h"
 #include "core/units.h"
@@ -133,9 +134,7 @@ TrackRunSummary runTrack(const TrackInput& in, const TrackRunOptions& o,
     const int f = frames[i];
     fs::path frame_file;
     if (o.frame_files) {
-      char name[32];
-      std::snprintf(name, sizeof(name), "%06d.json", f);
-      frame_file = o.out / "frames" / name;
+      frame_file = o.out / "frames" / (frameStem(f) + ".json");
       std::error_code ec;
       if (fs::is_regular_file(frame_file, ec)) {
         const nlohmann::json kept = nlohmann::json::parse(readTextFile(frame_file), nullptr, false);

@@ -24,6 +24,7 @@
 #include "batch_fixture.h"
 #include "core/io.h"
 #include "core/error.h"
+#include "core/names.h"
 #include "core/mesh.h"
 #include "scratch.h"
 

@@ -37,7 +37,7 @@ int runComposite(const CompositeArgs& a) {
   const carving::Take take(src);
   std::string main_name;
   for (const RigCamera& rc : take.rig().cameras)
-    if (rc.role == "main") main_name = rc.camera.name;
+    if (rc.role == kMainRole) main_name = rc.camera.name;
   if (main_name.empty()) throw Error("the rig has no camera with role 'main'", fieldContext("--rig"));
   Camera lens = take.rig().at(main_name).camera;
   if (!a.lens.empty()) {

@@ -128,9 +128,9 @@ cv::Mat contactSheet(const fs::path& take, const Rig& rig, int frame) {
                              cam + " plate", tile));
   }
   const fs::path truth = take / "truth";
-  tiles.push_back(labelled(depthPreview(readDepthExr(truth / "depth" / "main" / (name + ".exr"))),
+  tiles.push_back(labelled(depthPreview(readDepthExr(truth / "depth" / kMainCamera / (name + ".exr"))),
                            "main depth (truth)", tile));
-  cv::Mat mask = readImage(truth / "masks" / "main" / (name + ".png"), cv::IMREAD_GRAYSCALE);
+  cv::Mat mask = readImage(truth / "masks" / kMainCamera / (name + ".png"), cv::IMREAD_GRAYSCALE);
   cv::Mat mask_bgr;
   cv::cvtColor(mask, mask_bgr, cv::COLOR_GRAY2BGR);
   tiles.push_back(labelled(mask_bgr, "main actor mask (truth)", tile));
@@ -368,7 +368,7 @@ RunResult runTake(const fs::path& take_dir, const fs::path& rig_path, const fs::
       }
     }
     const cv::Mat truth = readImage(take_dir / "truth" / "composite" / (frameStem(f) + ".png"), cv::IMREAD_COLOR);
-    const cv::Mat mask = readImage(take_dir / "truth" / "masks" / "main" / (frameStem(f) + ".png"), cv::IMREAD_GRAYSCALE);
+    const cv::Mat mask = readImage(take_dir / "truth" / "masks" / kMainCamera / (frameStem(f) + ".png"), cv::IMREAD_GRAYSCALE);
     r.psnr_db.push_back(composite::actorPsnr(s.composite.bgr, truth, mask).psnr_db);
     r.min_psnr_db = std::min(r.min_psnr_db, r.psnr_db.back());
     r.mean_psnr_db += r.psnr_db.back();

@@ -18,6 +18,7 @@
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "core/units.h"
 #include "multicam/observations.h"
@@ -37,7 +38,7 @@ constexpr int kExitCheckFailed = 3;
 constexpr double kRadToDeg = degrees(1.0);
 
 struct RigArgs {
-  std::string take, board, floor, out, rig, camera, intrinsics, estimate, lens, main_camera = "main";
+  std::string take, board, floor, out, rig, camera, intrinsics, estimate, lens, main_camera = kMainCamera;
   std::string yaml_dir, picture, observations, compare, report;
   double focus = 0, zoom = 0;
   bool has_focus = false, has_zoom = false;
@@ -173,7 +174,7 @@ std::optional<RigCamera> intrinsicsFor(const RigArgs& a, const IntrinsicsSource&
     RigCamera rc;
     rc.camera = entry.camera;
     rc.camera.name = name;
-    rc.role = "main";
+    rc.role = kMainRole;
     return rc;
   }
   if (src.rig) {
@@ -192,7 +193,7 @@ std::optional<RigCamera> intrinsicsFor(const RigArgs& a, const IntrinsicsSource&
       return std::nullopt;
     }
     rc.camera.name = name;
-    rc.role = name == a.main_camera ? "main" : "witness";
+    rc.role = name == a.main_camera ? kMainRole : "witness";
     return rc;
   }
   return std::nullopt;

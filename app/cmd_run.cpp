@@ -196,7 +196,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
     const calib::LensTableEntry e = table.at(a.focus, a.zoom);
     std::string main_name;
     for (const RigCamera& rc : rig.cameras)
-      if (rc.role == "main") main_name = rc.camera.name;
+      if (rc.role == kMainRole) main_name = rc.camera.name;
     if (main_name.empty()) throw Error("the rig has no main camera for --lens", fieldContext("--lens"));
     RigCamera& main = rig.at(main_name);
     Camera lens = e.camera;

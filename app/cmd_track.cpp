@@ -13,6 +13,7 @@
 #include "app/progress.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "live/tracker.h"
 #include "take/take.h"
@@ -47,7 +48,7 @@ struct PropArgs {
 };
 
 struct CameraArgs {
-  std::string take, rig, tags, camera = "main", out, truth, frames;
+  std::string take, rig, tags, camera = kMainCamera, out, truth, frames;
   double fps = 0;
   float decimate = 1.0f;
   std::string sigma = "auto";
@@ -146,9 +147,9 @@ fs::path trackerMainPoses(const TrackArgs& a) {
                                        : e.context().field == "match" ? "--tracker-match" : e.context().field));
   }
   const Rig rig = readRig(a.rig);
-  std::string main_name = "main";  // the moving camera: the rig's "main" role, else the camera called main
+  std::string main_name = kMainCamera;  // the moving camera: the rig's "main" role, else the camera called main
   for (const RigCamera& rc : rig.cameras)
-    if (rc.role == "main") main_name = rc.camera.name;
+    if (rc.role == kMainRole) main_name = rc.camera.name;
   const RigCamera& main = rig.at(main_name);
   const take::Take streams(a.take);
   const live::FrameClock clock = live::frameClock(streams, main_name);

@@ -16,6 +16,7 @@
 #include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "core/stopwatch.h"
 #include "datasets/rigs.h"
@@ -149,7 +150,7 @@ int runSimulate(const SimulateArgs& a) {
 
 
 struct AlignArgs {
-  std::string take, observations, tracker_log, board, rig, camera = "main", config, out;
+  std::string take, observations, tracker_log, board, rig, camera = kMainCamera, config, out;
   double fps = 0, delay_search = 0.25, delay_step = 0.01;
   bool json = false;
 };

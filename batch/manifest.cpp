@@ -246,7 +246,7 @@ Manifest planBatch(const PlanOptions& options) {
       const RigCamera* rc = nullptr;
       for (const RigCamera& c : rig.cameras)
         if (c.camera.name == name) rc = &c;
-      if (rc->role != "main" &&
+      if (rc->role != kMainRole &&
           std::find(depth_cameras.begin(), depth_cameras.end(), name) == depth_cameras.end())
         depth_cameras.push_back(name);
     }
@@ -278,7 +278,7 @@ Manifest planBatch(const PlanOptions& options) {
                   "cams/<camera>.mkv|.mov|..., take.json \"sources\")",
                   fileContext(t.dir));
     for (const RigCamera& rc : rig.cameras)
-      if (rc.role == "main") t.main_camera = rc.camera.name;
+      if (rc.role == kMainRole) t.main_camera = rc.camera.name;
     if (!t.main_camera.empty()) t.depth_cameras = depth_cameras;
     if (!options.main_poses.empty()) {
       t.main_poses = fs::absolute(options.main_poses).lexically_normal();

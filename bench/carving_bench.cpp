@@ -29,6 +29,7 @@
 #include "carving/keyer.h"
 #include "carving/refine.h"
 #include "core/lens_model.h"
+#include "core/names.h"
 #include "core/pose.h"
 #include "core/threads.h"
 #include "datasets/render.h"
@@ -81,9 +82,9 @@ const Frame& frame() {
     ro.samples_per_pixel = 4;
     for (const RigCamera& rc : rig.cameras) {
       RigCamera c = rc;
-      if (c.role == "main") c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
+      if (c.role == kMainRole) c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
       const RenderedView view = renderView(c.camera, c.T_world_cam, scene, ro);
-      if (c.role == "main") {
+      if (c.role == kMainRole) {
         fr.main = c;
         fr.main_plate = view.bgr;
         fr.main_truth = view.mask;
@@ -179,7 +180,7 @@ Keyer& mainKeyer(int threads) {
     o.remember_garbage_zone = false;  // the main camera moves on its dolly
     o.threads = threads;
     m = std::make_unique<Keyer>(o);
-    m->key(frame().main_plate, "main");
+    m->key(frame().main_plate, kMainCamera);
   }
   return *m;
 }
@@ -222,7 +223,7 @@ void BM_KeyMain(benchmark::State& state) {
   Keyer& main = mainKeyer(threads);
   for (auto _ : state) {
     const Stopwatch sw;
-    KeyResult r = main.key(f.main_plate, "main");
+    KeyResult r = main.key(f.main_plate, kMainCamera);
     record("2_key_main" + threadKey(threads), "key_main", "1920x1080", sw, 5.0 / 9, threads);
     benchmark::DoNotOptimize(r.silhouette.data);
   }
@@ -252,13 +253,13 @@ BackdropFrame& backdropFrame(synth::Backdrop backdrop, int threads) {
   ro.truth = false;
   for (size_t i = 0; i < rig.cameras.size(); ++i) {
     RigCamera c = rig.cameras[i];
-    if (c.role == "main") c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
+    if (c.role == kMainRole) c.T_world_cam = mainCameraPose(kTime, config.take_duration_s, true);
     ro.camera_index = static_cast<int>(i);
     ro.frame = 1;
     b->frames.push_back(renderView(c.camera, c.T_world_cam, scene, ro).bgr);
     KeyerOptions o;
-    o.soft_alpha = c.role == "main";
-    o.remember_garbage_zone = c.role != "main";
+    o.soft_alpha = c.role == kMainRole;
+    o.remember_garbage_zone = c.role != kMainRole;
     o.threads = threads;
     b->keyers.emplace_back(o);
     ro.frame = 0;
@@ -529,7 +530,7 @@ RingCase& ringCase(int cameras, int threads) {
       });
     for (auto& t : pool) t.join();
     c.main.camera = c.witnesses[0].camera;
-    c.main.camera.name = "main";
+    c.main.camera.name = kMainCamera;
     c.main.camera.width = 1920;
     c.main.camera.height = 1080;
     c.main.camera.fx = c.main.camera.fy = 1500;

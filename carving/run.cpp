@@ -438,7 +438,7 @@ CarveJob::CarveJob(const Take& take, const RunOptions& options)
   m.depth_name = m.options.depth_camera;
   if (m.depth_name.empty()) {
     for (const RigCamera& rc : rig.cameras)
-      if (rc.role == "main") m.depth_name = rc.camera.name;
+      if (rc.role == kMainRole) m.depth_name = rc.camera.name;
   } else {
     rig.at(m.depth_name);
   }

@@ -148,7 +148,7 @@ Take::Take(const TakeSource& source) : source_(source) {
   }
 
   for (const RigCamera& rc : rig_.cameras)
-    if (rc.role == "main") main_name_ = rc.camera.name;
+    if (rc.role == kMainRole) main_name_ = rc.camera.name;
   if (!source_.main_poses.empty()) {
     if (main_name_.empty())
       throw Error("main camera poses given but the rig has no camera with role 'main'",

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include "core/error.h"
+#include "core/names.h"
 #include "core/units.h"
 #include "datasets/random.h"
 #include "datasets/studio.h"
@@ -157,7 +158,7 @@ RigCamera witnessCamera(int index, int count, std::uint64_t seed, int width, int
 
 Camera mainCamera(int width, int height) {
   Camera c;
-  c.name = "main";
+  c.name = kMainCamera;
   c.width = kMainDesignWidth;
   c.height = kMainDesignHeight;
   c.fx = 1500.0;
@@ -168,7 +169,7 @@ Camera mainCamera(int width, int height) {
   c.dist.k2 = 0.02;
   Camera out = c.scaled(static_cast<double>(width) / kMainDesignWidth,
                         static_cast<double>(height) / kMainDesignHeight);
-  out.name = "main";
+  out.name = kMainCamera;
   return out;
 }
 
@@ -192,7 +193,7 @@ Rig studioRig(const StudioRigOptions& options, double duration_s, bool dolly) {
     RigCamera main;
     main.camera = mainCamera(options.main_width, options.main_height);
     main.T_world_cam = mainCameraPose(0.0, duration_s, dolly);
-    main.role = "main";
+    main.role = kMainRole;
     rig.cameras.push_back(main);
   }
   return rig;

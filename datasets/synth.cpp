@@ -246,7 +246,7 @@ void SynthOptions::validate() const {
     badOption("cg_overscan", "must be in [0, 1] (got " + str(cg_overscan) + ")");
   }
   boardTypeFromString(board);
-  bool known_camera = camera == "main" || camera == "witness";
+  bool known_camera = camera == kMainCamera || camera == "witness";
   for (int i = 0; i < witness_cameras && !known_camera; ++i) known_camera = camera == witnessName(i);
   if (!known_camera) {
     badOption("camera", "must be main|witness|witness01.." + witnessName(witness_cameras - 1) + " (got '" + camera + "')");
@@ -287,7 +287,7 @@ void SynthOptions::validate() const {
   }
   if (floor_only && !floor_frames) badOption("floor_only", "contradicts floor_frames = false (--no-floor)");
   auto known = [&](const std::string& name) {
-    if (name == "main") return true;
+    if (name == kMainCamera) return true;
     for (int i = 0; i < witness_cameras; ++i) {
       if (witnessName(i) == name) return true;
     }
@@ -363,12 +363,12 @@ SynthSummary synthesizeTake(const SynthOptions& options, const fs::path& out,
     c.index = static_cast<int>(i);
     Rng gain_rng(hashKey(o.seed, kStreamGain, static_cast<std::uint64_t>(i)));
     c.gain = 1.0 + o.brightness_jitter * gain_rng.uniform(-1.0, 1.0);
-    c.moving = dolly && c.rig.role == "main";
+    c.moving = dolly && c.rig.role == kMainRole;
     cameras.push_back(c);
   }
   const TakeCamera* main_camera = nullptr;
   for (const TakeCamera& c : cameras) {
-    if (c.rig.role == "main") main_camera = &c;
+    if (c.rig.role == kMainRole) main_camera = &c;
   }
 
   // Board presets: the stage is static, so each camera renders its empty stage once and then

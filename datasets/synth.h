@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "core/names.h"
 #include "core/pose.h"
 
 namespace previz::synth {
@@ -37,7 +38,7 @@ struct SynthOptions {
   bool main_dolly = true;        // main camera moves along its dolly path (else fixed)
   double cg_overscan = 0.1;      // CG render of the main camera: extra fraction each way
   std::string board = "charuco"; // intrinsics/rig presets: chessboard|charuco|aprilgrid|circles|quadtree
-  std::string camera = "main";   // intrinsics preset: "main", "witness" (= witness01) or a witness name
+  std::string camera = kMainCamera;  // intrinsics preset: "main", "witness" (= witness01) or a witness name
   bool write_meshes = true;      // truth/mesh/actor.%06d.{ply,obj}
   // Studio preset: what the stage is dressed in (datasets/studio.h Backdrop): green | blue | set
   // (no screen). clean_plates: clean/<camera>.png of every static camera (the empty stage, same

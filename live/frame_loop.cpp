@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/pose.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
@@ -215,7 +216,7 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
     m.main_name = options.main_camera;
   } else {
     for (const RigCamera& rc : rig.cameras)
-      if (rc.role == "main") m.main_name = rc.camera.name;
+      if (rc.role == kMainRole) m.main_name = rc.camera.name;
     if (m.main_name.empty()) throw Error("run: the rig has no camera with role 'main'", fieldContext("main_camera"));
   }
   std::vector<RigCamera> carve_cams;

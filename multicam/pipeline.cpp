@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/stopwatch.h"
 
 namespace previz::multicam {
@@ -65,7 +66,7 @@ Rig initialRig(const RigTake& take, const RigObservations& obs, std::vector<std:
         // is intrinsics for another camera or mode.
         const double sx = static_cast<double>(size.width) / rc.camera.width;
         const double sy = static_cast<double>(size.height) / rc.camera.height;
-        if (rc.role != "main" || std::abs(sx - sy) >= 1e-9) {
+        if (rc.role != kMainRole || std::abs(sx - sy) >= 1e-9) {
           throw Error("rig: the intrinsics are for " + std::to_string(rc.camera.width) + "x" +
                           std::to_string(rc.camera.height) + " but the take's images are " +
                           std::to_string(size.width) + "x" + std::to_string(size.height),
@@ -87,7 +88,7 @@ Rig initialRig(const RigTake& take, const RigObservations& obs, std::vector<std:
       rc.camera.fx = rc.camera.fy = size.width;
       rc.camera.cx = (size.width - 1) / 2.0;
       rc.camera.cy = (size.height - 1) / 2.0;
-      rc.role = name == take.main_camera ? "main" : "witness";
+      rc.role = name == take.main_camera ? kMainRole : "witness";
       if (log)
         log->push_back(name + ": no intrinsics given; starting the estimate from fx = fy = " +
                        std::to_string(size.width) + " px");

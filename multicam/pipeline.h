@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/board.h"
+#include "core/names.h"
 #include "core/rig.h"
 #include "multicam/observations.h"
 #include "multicam/rig_calib.h"
@@ -29,7 +30,7 @@ struct RigTake {
   // Per camera, in `cameras` order: its intrinsics and role when known, nullopt when the solve
   // estimates them (RigCalibOptions::estimate_intrinsics must then name it) from a nominal guess.
   std::vector<std::optional<RigCamera>> known;
-  std::string main_camera = "main";  // the role of an estimated camera of this name
+  std::string main_camera = kMainCamera;  // the role of an estimated camera of this name
 };
 
 struct RigPipelineOptions {

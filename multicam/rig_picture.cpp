@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 
 namespace previz::multicam {
 namespace {
@@ -273,7 +274,7 @@ RigPicture writeRigPicture(const Rig& rig, const FloorSpec* floor, const fs::pat
 
   // Cameras: frustum edges and far rectangle in both views, centre dot, name.
   for (const RigCamera& rc : rig.cameras) {
-    const cv::Scalar colour = rc.role == "main" ? cv::Scalar(20, 20, 200) : cv::Scalar(60, 30, 0);
+    const cv::Scalar colour = rc.role == kMainRole ? cv::Scalar(20, 20, 200) : cv::Scalar(60, 30, 0);
     const Eigen::Vector3d c = rc.T_world_cam.translation();
     const std::vector<Eigen::Vector3d> far = frustumCorners(rc, options.frustum_m);
     std::vector<cv::Point2d> far_top, far_side;

@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/names.h"
 #include "core/srgb.h"
 #include "take/detail/files.h"
 #include "take/live.h"
@@ -220,10 +221,10 @@ Take::Take(const fs::path& dir, const TakeOptions& options) : dir_(dir), options
   if (j.contains("roles")) {
     for (const auto& [role, cam] : j["roles"].items()) {
       if (!cam.is_string()) throw Error("roles: each role names a camera", takeJsonContext(tj, "roles"));
-      if (role == "main") main_ = cam.get<std::string>();
+      if (role == kMainRole) main_ = cam.get<std::string>();
     }
   }
-  if (main_.empty() && streams_.count("main")) main_ = "main";
+  if (main_.empty() && streams_.count(kMainCamera)) main_ = kMainCamera;
 
   // The take's rate: take.json's, else the main camera's video, else the first video's.
   if (fps_from_ != "take.json") {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/names.h"
 #include "core/pose_lines.h"
 #include "core/rig.h"
 #include "tracking/props.h"
@@ -25,7 +26,7 @@ struct TrackInput {
   std::filesystem::path rig;         // rig.json
   std::filesystem::path props;       // props.json
   std::filesystem::path main_poses;  // optional JSON lines {"frame", "T_world_cam"} of a moving camera
-  std::string moving_camera = "main";  // the camera main_poses moves
+  std::string moving_camera = kMainCamera;  // the camera main_poses moves
   std::vector<std::string> cameras;  // default: every rig camera
   std::filesystem::path truth;       // optional truth/props.jsonl: errors in the summary
 };
@@ -89,7 +90,7 @@ struct CameraTrackInput {
   std::filesystem::path take;
   std::filesystem::path rig;         // for the camera's intrinsics
   std::filesystem::path tags;        // props.json whose props have T_world_prop
-  std::string camera = "main";
+  std::string camera = kMainCamera;
   std::filesystem::path truth;       // optional JSON lines {"frame", "T_world_cam"}
 };
 struct CameraTrackSummary {

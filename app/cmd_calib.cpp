@@ -113,7 +113,13 @@ int runIntrinsics(const CalibArgs& a) {
   calib::IntrinsicsOptions& solve = pipeline.solve;
   solve.locks = calib::IntrinsicLocks::parse(a.lock);
   try {
-    solve.model = lensModelFromString(a.model);
+    // "rational" is Brown-Conrady with k4 k5 k6 free (OpenCV's CALIB_RATIONAL_MODEL).
+    if (a.model == "rational" || a.model == "brown-rational") {
+      solve.model = LensModel::kBrownConrady;
+      solve.locks.rational = true;
+    } else {
+      solve.model = lensModelFromString(a.model);
+    }
   } catch (const Error& e) {
     ErrorContext context;
     context.field = "--model";
@@ -289,12 +295,14 @@ Runner addCalibCommand(CLI::App& app) {
   in->add_option("--refine", a->refine, "Rounds of frontal refinement (Datta et al. 2009; 0 = none)")
       ->capture_default_str();
   in->add_option("--model", a->model,
-                 "Lens model: brown (Brown-Conrady k1 k2 p1 p2 k3, OpenCV's calibrateCamera) or fisheye "
+                 "Lens model: brown (Brown-Conrady k1 k2 p1 p2 k3, OpenCV's calibrateCamera), rational "
+                 "(Brown-Conrady with k4 k5 k6 free, OpenCV's CALIB_RATIONAL_MODEL) or fisheye "
                  "(Kannala-Brandt k1..k4, OpenCV's fisheye module, Kalibr's equidistant)")
       ->capture_default_str();
   in->add_option("--lock", a->lock,
                  "Held parameters, comma-separated: fix_focal, fix_aspect, fix_principal_point, "
-                 "fix_k1, fix_k2, fix_k3, fix_k4 (fisheye), fix_tangential, fix_radial, fix_distortion, free_skew");
+                 "fix_k1, fix_k2, fix_k3, fix_k4 (fisheye or rational), fix_k5, fix_k6 (rational), fix_tangential, "
+                 "fix_radial, fix_distortion, free_skew");
   in->add_option("--loss", a->loss, "Robust loss: huber | cauchy | none")->capture_default_str();
   in->add_option("--loss-scale", a->loss_scale_px, "Robust loss scale, px")->capture_default_str();
   in->add_flag("--keep-soft", a->keep_soft, "Keep views the focus measure calls soft");

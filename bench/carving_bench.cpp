@@ -581,7 +581,7 @@ void BM_DepthCameras(benchmark::State& state) {
 // The dense reference: every cell centre of the grid, projected into every camera until one
 // carves it (k = 0, at least 2 views), occupancy written to a byte grid.
 struct DenseCamera {
-  double R[9], t[3], fx, fy, cx, cy, skew, k1, k2, p1, p2, k3;
+  double R[9], t[3], fx, fy, cx, cy, skew, k1, k2, p1, p2, k3, k4, k5, k6;
   int w, h;
   const cv::Mat* mask;
 };
@@ -612,7 +612,7 @@ long long denseCarve(const std::vector<DenseCamera>& cams, double voxel, int thr
               const double r2 = xn * xn + yn * yn;
               if (r2 > 2.0) continue;  // far outside every studio lens' view
               double xd, yd;
-              lens::brownDistort(c.k1, c.k2, c.p1, c.p2, c.k3, xn, yn, xd, yd);
+              lens::brownDistort(c.k1, c.k2, c.p1, c.p2, c.k3, c.k4, c.k5, c.k6, xn, yn, xd, yd);
               const int u = static_cast<int>(c.fx * xd + c.skew * yd + c.cx + 0.5 + 1e6) - 1000000;
               const int v = static_cast<int>(c.fy * yd + c.cy + 0.5 + 1e6) - 1000000;
               if (u < 0 || v < 0 || u >= c.w || v >= c.h) continue;
@@ -648,6 +648,7 @@ void BM_DenseCarve(benchmark::State& state) {
     }
     d.fx = c.fx, d.fy = c.fy, d.cx = c.cx, d.cy = c.cy, d.skew = c.skew;
     d.k1 = c.dist.k1, d.k2 = c.dist.k2, d.p1 = c.dist.p1, d.p2 = c.dist.p2, d.k3 = c.dist.k3;
+    d.k4 = c.dist.k4, d.k5 = c.dist.k5, d.k6 = c.dist.k6;
     d.w = c.width, d.h = c.height;
     d.mask = &f.truth_masks[i];
     cams.push_back(d);

@@ -18,7 +18,8 @@
 namespace previz::calib {
 
 const std::array<const char*, kIntrinsicCount> kIntrinsicNames = {
-    "fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3", "k4"};
+    "fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"};
+static_assert(kIntrinsicCount == detail::kIntrinsicCount, "calib/intrinsics.h and detail/projection.h disagree");
 
 namespace {
 
@@ -30,6 +31,8 @@ using detail::kK1;
 using detail::kK2;
 using detail::kK3;
 using detail::kK4;
+using detail::kK5;
+using detail::kK6;
 using detail::kP1;
 using detail::kP2;
 using detail::kSkew;
@@ -159,7 +162,7 @@ std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, co
   std::vector<cv::Point3d> object;
   std::vector<cv::Point2d> image;
   cv::Matx33d K(intr[kFx], intr[kSkew], intr[kCx], 0, intr[kFy], intr[kCy], 0, 0, 1);
-  cv::Vec<double, 5> dist(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3]);
+  cv::Vec<double, 8> dist(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], intr[kK4], intr[kK5], intr[kK6]);
   // OpenCV's solvePnP knows Brown-Conrady only. Another lens's points are turned into rays and
   // seen by a virtual pinhole looking along their mean (R_virtual_cam): a board across a wide
   // angle is then near that pinhole's axis, where normalized coordinates stay finite.
@@ -189,7 +192,7 @@ std::optional<std::array<double, 6>> pnp(const double* intr, LensModel model, co
       image.emplace_back(q.x() / q.z(), q.y() / q.z());
     }
     K = cv::Matx33d::eye();
-    dist = cv::Vec<double, 5>::all(0.0);
+    dist = cv::Vec<double, 8>::all(0.0);
   }
   cv::Vec3d rvec, tvec;
   bool ok = false;
@@ -250,16 +253,22 @@ IntrinsicLocks IntrinsicLocks::parse(const std::string& list) {
     else if (name == "fix_k2") locks.fix_k2 = true;
     else if (name == "fix_k3") locks.fix_k3 = true;
     else if (name == "fix_k4") locks.fix_k4 = true;
+    else if (name == "fix_k5") locks.fix_k5 = true;
+    else if (name == "fix_k6") locks.fix_k6 = true;
+    else if (name == "rational") locks.rational = true;
     else if (name == "fix_tangential") locks.fix_tangential = true;
-    else if (name == "fix_radial") locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = true;
+    else if (name == "fix_radial")
+      locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = locks.fix_k5 = locks.fix_k6 = true;
     else if (name == "fix_distortion")
-      locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = locks.fix_tangential = true;
+      locks.fix_k1 = locks.fix_k2 = locks.fix_k3 = locks.fix_k4 = locks.fix_k5 = locks.fix_k6 =
+          locks.fix_tangential = true;
     else {
       ErrorContext context;
       context.field = "lock";
       throw Error("calibrate: unknown lock '" + name +
                       "' (known: fix_focal, fix_aspect, fix_principal_point, fix_skew, free_skew, "
-                      "fix_k1, fix_k2, fix_k3, fix_k4, fix_tangential, fix_radial, fix_distortion)",
+                      "fix_k1, fix_k2, fix_k3, fix_k4, fix_k5, fix_k6, fix_tangential, fix_radial, fix_distortion, "
+                      "rational)",
                   context);
     }
   }
@@ -276,7 +285,10 @@ std::string IntrinsicLocks::toString() const {
   if (fix_k2) names.push_back("fix_k2");
   if (fix_k3) names.push_back("fix_k3");
   if (fix_k4) names.push_back("fix_k4");
+  if (fix_k5) names.push_back("fix_k5");
+  if (fix_k6) names.push_back("fix_k6");
   if (fix_tangential) names.push_back("fix_tangential");
+  if (rational) names.push_back("rational");
   std::string out;
   for (const auto& n : names) out += (out.empty() ? "" : ",") + n;
   return out;
@@ -292,9 +304,11 @@ std::array<bool, kIntrinsicCount> IntrinsicLocks::heldMask(LensModel model) cons
   m[kK2] = fix_k2;
   m[kK3] = fix_k3;
   m[kK4] = fix_k4;
+  m[kK5] = fix_k5;
+  m[kK6] = fix_k6;
   m[kP1] = m[kP2] = fix_tangential;
-  if (model == LensModel::kKannalaBrandt) m[kP1] = m[kP2] = true;
-  else m[kK4] = true;
+  if (model == LensModel::kKannalaBrandt) m[kP1] = m[kP2] = m[kK5] = m[kK6] = true;
+  else if (!rational) m[kK4] = m[kK5] = m[kK6] = true;
   return m;
 }
 
@@ -491,8 +505,19 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
     }
     int flags = 0;
     cv::Matx33d K(lock_values.fx, 0, lock_values.cx, 0, lock_values.fy, lock_values.cy, 0, 0, 1);
-    cv::Mat dist = (cv::Mat_<double>(1, 5) << lock_values.dist.k1, lock_values.dist.k2,
-                    lock_values.dist.p1, lock_values.dist.p2, lock_values.dist.k3);
+    // OpenCV's rational model when k4 k5 k6 are solved, or held at non-zero values; held ones
+    // are CALIB_FIX_K4..6 (OpenCV fixes them at the guess it is given).
+    const bool rational = options.locks.rational || lock_values.dist.isRational();
+    cv::Mat dist = (cv::Mat_<double>(1, 8) << lock_values.dist.k1, lock_values.dist.k2, lock_values.dist.p1,
+                    lock_values.dist.p2, lock_values.dist.k3, lock_values.dist.k4, lock_values.dist.k5,
+                    lock_values.dist.k6);
+    if (!rational) dist = dist.colRange(0, 5).clone();
+    if (rational) {
+      flags |= cv::CALIB_RATIONAL_MODEL;
+      if (held[kK4]) flags |= cv::CALIB_FIX_K4;
+      if (held[kK5]) flags |= cv::CALIB_FIX_K5;
+      if (held[kK6]) flags |= cv::CALIB_FIX_K6;
+    }
     if (options.initial_camera) flags |= cv::CALIB_USE_INTRINSIC_GUESS;
     if (options.locks.fix_focal) flags |= cv::CALIB_FIX_FOCAL_LENGTH;
     if (options.locks.fix_aspect) flags |= cv::CALIB_FIX_ASPECT_RATIO;
@@ -527,6 +552,11 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
     init.dist.p1 = dist.at<double>(2);
     init.dist.p2 = dist.at<double>(3);
     init.dist.k3 = dist.at<double>(4);
+    if (rational) {
+      init.dist.k4 = dist.at<double>(5);
+      init.dist.k5 = dist.at<double>(6);
+      init.dist.k6 = dist.at<double>(7);
+    }
     detail::cameraToVector(init, intr);
     for (size_t k = 0; k < used.size(); ++k) {
       const cv::Vec3d r(rvecs[k]), t(tvecs[k]);
@@ -814,8 +844,10 @@ std::string IntrinsicsResult::fullReport() const {
   s << "  lens model           " << previz::toString(model) << "\n";
   s << "  parameter        start         estimate        sigma\n";
   for (int i = 0; i < kIntrinsicCount; ++i) {
-    // Terms the lens model does not have are not listed.
-    if (model == LensModel::kKannalaBrandt ? (i == kP1 || i == kP2) : i == kK4) continue;
+    // Terms the lens model does not have are not listed, nor Brown's rational terms when they
+    // were not solved and are 0.
+    if (model == LensModel::kKannalaBrandt && (i == kP1 || i == kP2 || i == kK5 || i == kK6)) continue;
+    if (model == LensModel::kBrownConrady && i >= kK4 && held[i] && est_v[i] == 0.0) continue;
     const bool is_distortion = i >= kK1;
     std::snprintf(line, sizeof(line),
                   is_distortion ? "  %-6s %15.7f %15.7f %12.7f%s\n" : "  %-6s %15.4f %15.4f %12.4f%s\n",

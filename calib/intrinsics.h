@@ -1,8 +1,8 @@
 #pragma once
 // Intrinsic calibration of one camera from views of a planar board: OpenCV's calibrateCamera
 // gives the starting point (cv::fisheye::calibrate for a Kannala–Brandt lens), then a Ceres bundle
-// adjustment over the intrinsics (fx fy cx cy [skew] and the lens model's terms: k1 k2 p1 p2 k3, or
-// k1 k2 k3 k4) and every board pose, with a robust loss, outlier rejection, parameter
+// adjustment over the intrinsics (fx fy cx cy [skew] and the lens model's terms: k1 k2 p1 p2 k3 [k4
+// k5 k6, the rational model], or k1 k2 k3 k4) and every board pose, with a robust loss, outlier rejection, parameter
 // locks and a covariance that says how sure each parameter is. The result explains itself
 // (IntrinsicsResult::fullReport()).
 // Pixels: (0,0) = centre of the top-left pixel; board frame and poses: docs/conventions.md.
@@ -22,10 +22,11 @@
 namespace previz::calib {
 
 // Order of the intrinsic vector used by covariances and sigmas.
-// The lens model decides which distortion terms are free: Brown–Conrady k1 k2 p1 p2 k3 (k4 held at
-// 0), Kannala–Brandt k1 k2 k3 k4 (p1 p2 held at 0).
-constexpr int kIntrinsicCount = 11;
-extern const std::array<const char*, kIntrinsicCount> kIntrinsicNames;  // fx fy cx cy skew k1 k2 p1 p2 k3 k4
+// The lens model decides which distortion terms are free: Brown–Conrady k1 k2 p1 p2 k3 (and its
+// rational k4 k5 k6 under IntrinsicLocks::rational, else held), Kannala–Brandt k1 k2 k3 k4 (p1 p2
+// k5 k6 held at 0).
+constexpr int kIntrinsicCount = 13;
+extern const std::array<const char*, kIntrinsicCount> kIntrinsicNames;  // fx fy cx cy skew k1 k2 p1 p2 k3 k4 k5 k6
 
 // Parameters held at their initial value (from IntrinsicsOptions::initial_camera, else: aspect
 // 1, principal point at the image centre ((w-1)/2, (h-1)/2), distortion 0).
@@ -35,10 +36,15 @@ struct IntrinsicLocks {
   bool fix_principal_point = false;  // cx, cy
   bool fix_skew = true;              // skew is estimated only when this is cleared
   bool fix_k1 = false, fix_k2 = false, fix_k3 = false, fix_k4 = false;
+  bool fix_k5 = false, fix_k6 = false;  // the rational terms (with rational)
   bool fix_tangential = false;       // p1, p2
+  // Brown–Conrady: also solve the rational terms k4 k5 k6 (OpenCV's CALIB_RATIONAL_MODEL; fix_k4..6
+  // still hold single ones). Without it they are held (at 0 unless initial_camera has them).
+  // Kannala–Brandt ignores it (its k4 is free unless fix_k4; it has no k5 k6).
+  bool rational = false;
 
   // "fix_k3,fix_aspect": comma-separated names of the flags above, plus fix_distortion (all of
-  // k1 k2 k3 k4 p1 p2), fix_radial (k1 k2 k3 k4) and free_skew. Throws Error naming the bad name.
+  // k1..k6 p1 p2), fix_radial (k1..k6), free_skew and rational. Throws Error naming the bad name.
   static IntrinsicLocks parse(const std::string& list);
   std::string toString() const;  // the set flags, comma-separated ("" when none)
   // Per intrinsic (kIntrinsicNames order): true when held. fy counts as held under fix_aspect
@@ -110,12 +116,12 @@ struct IntrinsicsResult {
   IntrinsicLocks locks;
 
   // Standard deviations in kIntrinsicNames order (0 for held parameters), from the covariance
-  // scaled by the residual variance. covariance is 10 x 10 in the same order.
+  // scaled by the residual variance. covariance is kIntrinsicCount square in the same order.
   std::array<double, kIntrinsicCount> sigma{};
   Eigen::MatrixXd covariance;
   bool covariance_ok = false;
   std::string covariance_message;  // why it failed, when it did
-  // Joint covariance of [intrinsics (10), then for each used view in order: angle-axis (3),
+  // Joint covariance of [intrinsics (kIntrinsicCount), then for each used view in order: angle-axis (3),
   // translation (3) of T_cam_board] when IntrinsicsOptions::joint_covariance.
   Eigen::MatrixXd joint_covariance;
   std::vector<int> joint_views;   // view index of each pose block of joint_covariance

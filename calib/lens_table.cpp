@@ -191,6 +191,18 @@ void LensTable::validate() const {
       e.camera.validate();
       // Interpolation, the Unreal and OpenTrackIO lens files carry k1 k2 k3 p1 p2.
       requireBrownConrady(lens_name, e.camera.dist, "a lens table");
+      // Nor the rational terms: none of those files has a place for them, and a blend of two
+      // rational factors is not the factor of the blended coefficients; refused, never dropped.
+      const std::pair<const char*, double> rational[] = {
+          {"k4", e.camera.dist.k4}, {"k5", e.camera.dist.k5}, {"k6", e.camera.dist.k6}};
+      for (const auto& [term, v] : rational)
+        if (v != 0.0) {
+          ErrorContext context;
+          context.field = std::string("distortion.") + term;
+          throw Error("a lens table carries k1 k2 k3 p1 p2 only; this entry has the rational term " +
+                          std::string(term) + " = " + std::to_string(v),
+                      context);
+        }
     } catch (const Error& err) {
       fail(err.message(), entryField(i, "camera." + err.context().field));
     }

@@ -50,7 +50,7 @@ double worstSigma(const Eigen::Matrix2d& C) {
   return std::sqrt(std::max(0.0, eig.eigenvalues()(1)));
 }
 
-// Pixel of a camera-frame point with its Jacobians wrt intrinsics (2 x 10) and the point (2 x 3).
+// Pixel of a camera-frame point with its Jacobians wrt intrinsics (2 x kIntrinsicCount) and the point (2 x 3).
 void projectWithJacobians(const double* intr, LensModel model, const Eigen::Vector3d& p,
                           Eigen::Matrix<double, 2, kIntrinsicCount>& J_intr,
                           Eigen::Matrix<double, 2, 3>& J_point) {

@@ -173,6 +173,8 @@ CameraModel makeCameraModel(const RigCamera& rig_camera) {
   m.p2 = c.dist.p2;
   m.k3 = c.dist.k3;
   m.k4 = c.dist.k4;
+  m.k5 = c.dist.k5;
+  m.k6 = c.dist.k6;
   m.kannala_brandt = c.dist.model == LensModel::kKannalaBrandt;
   m.distorted = !c.dist.isZero();
   // 2 % beyond the border: the valid disc must contain every point that lands in the image.

@@ -109,6 +109,117 @@ double turningRadiusSquared(const Distortion& d) {
   return s;
 }
 
+// ---- The rational Brown–Conrady domain (k4 k5 k6 not all 0) ---------------------------------
+// With radial = N(s) / D(s) (s = r^2), d/dr [r radial] = P(s) / D(s)^2 where
+//   P = N D + 2 s (N' D - N D')   (degree <= 6 in s)
+// so the radial map is increasing exactly while P > 0 and D > 0 (a zero of D is a pole of the
+// factor: the domain ends there too). The plain model keeps its closed-form cubic above (and so
+// its numbers); the rational one finds the first sign change of P and D by isolating the real
+// roots of each polynomial between those of its derivative (recursively down to degree 1):
+// exact in the sense that no narrow dip between samples can be missed.
+
+inline double horner(const double* c, int deg, double s) {
+  double v = c[deg];
+  for (int i = deg - 1; i >= 0; --i) v = v * s + c[i];
+  return v;
+}
+
+// The real roots of c (degree deg, c[deg] != 0) in (0, bound), ascending, where c changes sign
+// or touches zero at a root of its derivative. At most deg of them.
+int rootsInRange(const double* c, int deg, double bound, double* out) {
+  if (deg <= 0) return 0;
+  if (deg == 1) {
+    const double r = -c[0] / c[1];
+    if (r > 0.0 && r < bound) {
+      out[0] = r;
+      return 1;
+    }
+    return 0;
+  }
+  double dc[6];
+  for (int i = 1; i <= deg; ++i) dc[i - 1] = i * c[i];
+  double ends[8];
+  int n = 0;
+  ends[n++] = 0.0;
+  n += rootsInRange(dc, deg - 1, bound, ends + n);
+  ends[n++] = bound;
+  // c is monotone between consecutive ends: at most one root in each, found by bisection.
+  int m = 0;
+  for (int i = 0; i + 1 < n; ++i) {
+    double lo = ends[i], hi = ends[i + 1];
+    const double flo = horner(c, deg, lo), fhi = horner(c, deg, hi);
+    if (flo == 0.0) {
+      if (lo > 0.0 && (m == 0 || out[m - 1] != lo)) out[m++] = lo;
+      continue;
+    }
+    if ((flo > 0.0) == (fhi > 0.0) && fhi != 0.0) continue;
+    const bool rising = flo < 0.0;
+    for (int it = 0; it < 2200; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      if (!(mid > lo && mid < hi)) break;
+      ((horner(c, deg, mid) < 0.0) == rising ? lo : hi) = mid;
+    }
+    out[m++] = hi;
+  }
+  return m;
+}
+
+// Smallest s > 0 with c(s) <= 0, given c(0) = c[0] = 1 > 0; +inf when there is none.
+double firstNonPositive(const double* coeffs, int deg) {
+  double c[7];
+  for (int i = 0; i <= deg; ++i) c[i] = coeffs[i];
+  while (deg > 0 && c[deg] == 0.0) --deg;
+  if (deg == 0) return kInf;
+  // Every root lies within Cauchy's bound 1 + max |c_i / c_deg|; past it c has c[deg]'s sign.
+  double bound = 0.0;
+  for (int i = 0; i < deg; ++i) bound = std::max(bound, std::abs(c[i] / c[deg]));
+  bound = 1.0 + bound;
+  if (!std::isfinite(bound)) return kInf;  // a turning point beyond any real lens
+  bound *= 2.0;
+  // c > 0 up to its first root; the bisection returns the end where c <= 0.
+  double roots[6];
+  return rootsInRange(c, deg, bound, roots) > 0 ? roots[0] : kInf;
+}
+
+// The squared turning radius of a rational Brown–Conrady lens: min(first s with P <= 0, first s
+// with D <= 0).
+double rationalTurningRadiusSquaredUncached(const Distortion& d) {
+  const double N[4] = {1.0, d.k1, d.k2, d.k3}, D[4] = {1.0, d.k4, d.k5, d.k6};
+  const double sN1[4] = {0.0, d.k1, 2.0 * d.k2, 3.0 * d.k3}, sD1[4] = {0.0, d.k4, 2.0 * d.k5, 3.0 * d.k6};
+  double P[7] = {0, 0, 0, 0, 0, 0, 0};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) P[i + j] += N[i] * D[j] + 2.0 * (sN1[i] * D[j] - N[i] * sD1[j]);
+  return std::min(firstNonPositive(P, 6), firstNonPositive(D, 3));
+}
+
+// The same, remembered for the last lens a thread asked about (project() checks the domain of
+// every point).
+double rationalTurningRadiusSquared(const Distortion& d) {
+  thread_local double key[6] = {std::numeric_limits<double>::quiet_NaN(), 0, 0, 0, 0, 0};
+  thread_local double value = 0;
+  if (!(key[0] == d.k1 && key[1] == d.k2 && key[2] == d.k3 && key[3] == d.k4 && key[4] == d.k5 &&
+        key[5] == d.k6)) {
+    value = rationalTurningRadiusSquaredUncached(d);
+    key[0] = d.k1;
+    key[1] = d.k2;
+    key[2] = d.k3;
+    key[3] = d.k4;
+    key[4] = d.k5;
+    key[5] = d.k6;
+  }
+  return value;
+}
+
+// The Brown–Conrady domain for either form: the plain model's closed form, or the rational one.
+double brownTurningRadiusSquared(const Distortion& d) {
+  return d.isRational() ? rationalTurningRadiusSquared(d) : turningRadiusSquared(d);
+}
+
+bool brownIncreasingUpTo(const Distortion& d, double s) {
+  if (!d.isRational()) return radialIncreasingUpTo(d, s);
+  return s >= 0.0 && s < rationalTurningRadiusSquared(d);
+}
+
 struct DistortEval {
   double xd, yd;
 };
@@ -118,7 +229,7 @@ inline DistortEval distortXY(const Distortion& d, double x, double y) {
   if (d.model == LensModel::kKannalaBrandt)
     lens::kannalaBrandtDistort(d.k1, d.k2, d.k3, d.k4, x, y, e.xd, e.yd);
   else
-    lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, e.xd, e.yd);
+    lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6, x, y, e.xd, e.yd);
   return e;
 }
 
@@ -134,7 +245,8 @@ inline Jacobian distortJacobianXY(const Distortion& d, double x, double y) {
   if (d.model == LensModel::kKannalaBrandt)
     lens::kannalaBrandtDistortWithJacobian(d.k1, d.k2, d.k3, d.k4, x, y, xd, yd, j.xx, j.xy, j.yy);
   else
-    lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, x, y, xd, yd, j.xx, j.xy, j.yy);
+    lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6, x, y, xd, yd, j.xx, j.xy,
+                                   j.yy);
   return j;
 }
 
@@ -254,15 +366,18 @@ InverseDistortion::InverseDistortion(const Distortion& dist)
     rd_max_ = lens::kannalaBrandtTheta(dist_.k1, dist_.k2, dist_.k3, dist_.k4, kb_max_theta_);
     return;
   }
-  s_max_ = turningRadiusSquared(dist_);
+  s_max_ = brownTurningRadiusSquared(dist_);
   r_max_ = std::sqrt(s_max_);
   if (std::isfinite(r_max_)) {
     // |distort(x)| <= r radial(r) + |tangential(x)| and, writing x = r (cos a, sin a),
     // tangential(x) = r^2 (2 (p2, p1) + R(2a) (p2, -p1)), so |tangential| <= 3 r^2 |p|. The
     // radial part is increasing on the domain, hence this bound at r_max covers all of it.
-    const double radial = lens::brownRadial(dist_.k1, dist_.k2, dist_.k3, s_max_);
+    const double radial =
+        lens::brownRadial(dist_.k1, dist_.k2, dist_.k3, dist_.k4, dist_.k5, dist_.k6, s_max_);
     const double tangential = 3.0 * s_max_ * std::hypot(dist_.p1, dist_.p2);
     rd_max_ = (r_max_ * radial + tangential) * (1.0 + 1e-12);
+    // At a pole of the rational factor the bound is +inf (or NaN from inf * 0).
+    if (!(rd_max_ >= 0.0)) rd_max_ = kInf;
   } else {
     rd_max_ = kInf;
   }
@@ -411,7 +526,7 @@ InverseResult InverseDistortion::fixedPoint(const Eigen::Vector2d& target,
   const double runaway2 = runaway * runaway;
   for (;;) {
     const double r2 = x * x + y * y;
-    const double radial = lens::brownRadial(d.k1, d.k2, d.k3, r2);
+    const double radial = lens::brownRadial(d.k1, d.k2, d.k3, d.k4, d.k5, d.k6, r2);
     double tanx, tany;
     lens::brownTangential(d.p1, d.p2, x, y, tanx, tany);
     // The residual of the current iterate costs nothing extra: it uses the same terms as the
@@ -468,14 +583,19 @@ void Camera::validate() const {
   if (!std::isfinite(skew)) bad("skew", "must be finite (got " + fmt(skew) + ")");
   const std::pair<const char*, double> terms[] = {
       {"distortion.k1", dist.k1}, {"distortion.k2", dist.k2}, {"distortion.p1", dist.p1},
-      {"distortion.p2", dist.p2}, {"distortion.k3", dist.k3}, {"distortion.k4", dist.k4}};
+      {"distortion.p2", dist.p2}, {"distortion.k3", dist.k3}, {"distortion.k4", dist.k4},
+      {"distortion.k5", dist.k5}, {"distortion.k6", dist.k6}};
   for (const auto& [field, v] : terms)
     if (!std::isfinite(v)) bad(field, "must be finite (got " + fmt(v) + ")");
-  if (dist.model == LensModel::kBrownConrady && dist.k4 != 0.0)
-    bad("distortion.k4", "brown-conrady has k1 k2 p1 p2 k3; k4 is kannala-brandt's (got " + fmt(dist.k4) + ")");
   if (dist.model == LensModel::kKannalaBrandt) {
     if (dist.p1 != 0.0) bad("distortion.p1", "kannala-brandt has k1 k2 k3 k4 only (got p1 " + fmt(dist.p1) + ")");
     if (dist.p2 != 0.0) bad("distortion.p2", "kannala-brandt has k1 k2 k3 k4 only (got p2 " + fmt(dist.p2) + ")");
+    if (dist.k5 != 0.0)
+      bad("distortion.k5", "kannala-brandt has k1 k2 k3 k4 only; k5 is brown-conrady's rational term (got k5 " +
+                               fmt(dist.k5) + ")");
+    if (dist.k6 != 0.0)
+      bad("distortion.k6", "kannala-brandt has k1 k2 k3 k4 only; k6 is brown-conrady's rational term (got k6 " +
+                               fmt(dist.k6) + ")");
   } else if (dist.model != LensModel::kBrownConrady) {
     bad("distortion.model", "unknown lens model");
   }
@@ -512,12 +632,12 @@ InverseResult Camera::undistort(const Eigen::Vector2d& xd, const InverseOptions&
 
 double Camera::maxInvertibleRadius() const {
   if (!dist.isBrown()) return std::sqrt(kbRadiusSquared(kbMaxTheta(dist)));
-  return std::sqrt(turningRadiusSquared(dist));
+  return std::sqrt(brownTurningRadiusSquared(dist));
 }
 
 bool Camera::inInvertibleDomain(const Eigen::Vector2d& x) const {
   if (!dist.isBrown()) return x.squaredNorm() < kbRadiusSquared(kbMaxTheta(dist));
-  if (!radialIncreasingUpTo(dist, x.squaredNorm())) return false;
+  if (!brownIncreasingUpTo(dist, x.squaredNorm())) return false;
   if (dist.p1 == 0.0 && dist.p2 == 0.0) return true;
   return distortJacobianXY(dist, x.x(), x.y()).det() > 0.0;
 }

@@ -16,8 +16,8 @@
 namespace previz {
 
 enum class LensModel {
-  kBrownConrady,   // k1 k2 p1 p2 k3 (OpenCV's order); k4 must be 0
-  kKannalaBrandt,  // k1 k2 k3 k4 on theta (OpenCV fisheye's D); p1, p2 must be 0
+  kBrownConrady,   // k1 k2 p1 p2 k3 [k4 k5 k6] (OpenCV's order; k4..k6 the rational terms, 0 when unused)
+  kKannalaBrandt,  // k1 k2 k3 k4 on theta (OpenCV fisheye's D); p1, p2, k5, k6 must be 0
 };
 // "brown-conrady" / "kannala-brandt" (the names rig.json, reports and --model use).
 const char* toString(LensModel model);
@@ -25,21 +25,33 @@ const char* toString(LensModel model);
 // equidistant, kb4. Throws Error naming the value.
 LensModel lensModelFromString(const std::string& name);
 
-// {k1, k2, p1, p2, k3} is a Brown–Conrady lens (the model comes last so that OpenCV's order
-// initialises it); Distortion::kannalaBrandt(k1, k2, k3, k4) a fisheye.
+// {k1, k2, p1, p2, k3} is a Brown–Conrady lens and {k1, k2, p1, p2, k3, k4, k5, k6} one with
+// OpenCV's rational terms: the order of OpenCV's D (the model comes last so that D's order
+// initialises it); Distortion::kannalaBrandt(k1, k2, k3, k4) a fisheye. k4 is the rational
+// denominator's first term for Brown–Conrady and theta^9's coefficient for Kannala–Brandt.
 struct Distortion {
-  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0, k4 = 0;
+  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0, k4 = 0, k5 = 0, k6 = 0;
   LensModel model = LensModel::kBrownConrady;
   static Distortion kannalaBrandt(double k1, double k2, double k3, double k4) {
-    return {k1, k2, 0, 0, k3, k4, LensModel::kKannalaBrandt};
+    Distortion d;
+    d.k1 = k1;
+    d.k2 = k2;
+    d.k3 = k3;
+    d.k4 = k4;
+    d.model = LensModel::kKannalaBrandt;
+    return d;
   }
   // The identity map (a Kannala–Brandt lens with zero coefficients is not: it is equidistant).
   bool isZero() const {
-    return model == LensModel::kBrownConrady && k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0 && k4 == 0;
+    return model == LensModel::kBrownConrady && k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0 && k4 == 0 &&
+           k5 == 0 && k6 == 0;
   }
   bool isBrown() const { return model == LensModel::kBrownConrady; }
+  // A Brown–Conrady lens with a rational denominator (any of k4 k5 k6 non-zero).
+  bool isRational() const { return isBrown() && (k4 != 0 || k5 != 0 || k6 != 0); }
   bool operator==(const Distortion& o) const {
-    return model == o.model && k1 == o.k1 && k2 == o.k2 && p1 == o.p1 && p2 == o.p2 && k3 == o.k3 && k4 == o.k4;
+    return model == o.model && k1 == o.k1 && k2 == o.k2 && p1 == o.p1 && p2 == o.p2 && k3 == o.k3 && k4 == o.k4 &&
+           k5 == o.k5 && k6 == o.k6;
   }
   bool operator!=(const Distortion& o) const { return !(*this == o); }
 };
@@ -112,16 +124,17 @@ class Camera {
 
   Eigen::Matrix3d K() const;
 
-  // Ideal normalized -> distorted normalized (forward Brown model).
+  // Ideal normalized -> distorted normalized (the lens model of core/lens_model.h).
   Eigen::Vector2d distort(const Eigen::Vector2d& x) const;
   // d distort / d x (2x2).
   Eigen::Matrix2d distortJacobian(const Eigen::Vector2d& x) const;
   // Distorted normalized -> ideal normalized, with a convergence report.
   InverseResult undistort(const Eigen::Vector2d& xd, const InverseOptions& options = {}) const;
 
-  // Radius (ideal normalized) at which the radial map (Brown: r -> r (1 + k1 r^2 + k2 r^4 +
-  // k3 r^6); Kannala–Brandt: tan of the angle where theta_d stops increasing, or of 90 degrees)
-  // stops increasing; +inf when it never does. Points past it fold back onto the image and
+  // Radius (ideal normalized) at which the radial map (Brown: r -> r radial(r^2), radial the
+  // rational factor of lens_model.h, which ends the domain also at a zero of its denominator;
+  // Kannala–Brandt: tan of the angle where theta_d stops increasing, or of 90 degrees) stops
+  // increasing; +inf when it never does. Points past it fold back onto the image and
   // are reported as not invertible / not projectable.
   double maxInvertibleRadius() const;
   // True when the ideal normalized point lies in the invertible domain (see InverseDistortion).

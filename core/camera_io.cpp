@@ -230,20 +230,26 @@ Camera readOpenCvIntrinsics(const cv::FileStorage& store, const fs::path& file, 
       const Eigen::MatrixXd D = readOpenCvMatrix(store[d_key], file, name, d_key);
       if (D.rows() != 1 && D.cols() != 1) throw Error("expected a 1xN or Nx1 matrix", cameraFileContext(file, name, d_key));
       const Eigen::Index n = D.size();
-      if (n < 4)
-        throw Error("expected at least 4 coefficients (k1 k2 p1 p2), got " + std::to_string(n),
+      // OpenCV's lengths: 4, 5, 8 (rational k4 k5 k6), 12 (thin prism s1..s4), 14 (tilt tauX tauY).
+      if (n != 4 && n != 5 && n != 8 && n != 12 && n != 14)
+        throw Error("expected 4, 5, 8, 12 or 14 coefficients (OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 "
+                    "[tauX tauY]]]]), got " + std::to_string(n),
                     cameraFileContext(file, name, d_key));
-      for (Eigen::Index i = 5; i < n; ++i)
+      static const char* const kExtra[] = {"s1", "s2", "s3", "s4", "tauX", "tauY"};
+      for (Eigen::Index i = 8; i < n; ++i)
         if (D(i) != 0.0)
-          throw Error("coefficient " + std::to_string(i) +
-                          " is non-zero: rational / thin-prism / tilt terms are not supported "
-                          "(model brown-conrady-opencv: k1 k2 p1 p2 k3)",
+          throw Error("coefficient " + std::to_string(i) + " (" + kExtra[i - 8] + ") of " + std::to_string(n) +
+                          " is non-zero: thin-prism and tilt terms are not supported "
+                          "(model brown-conrady-opencv: k1 k2 p1 p2 k3 k4 k5 k6)",
                       cameraFileContext(file, name, d_key));
       c.dist.k1 = D(0);
       c.dist.k2 = D(1);
       c.dist.p1 = D(2);
       c.dist.p2 = D(3);
       c.dist.k3 = n > 4 ? D(4) : 0.0;
+      c.dist.k4 = n > 5 ? D(5) : 0.0;
+      c.dist.k5 = n > 5 ? D(6) : 0.0;
+      c.dist.k6 = n > 5 ? D(7) : 0.0;
     }
   } catch (const cv::Exception& e) {
     throw Error(std::string("malformed OpenCV FileStorage content: ") + e.what(), cameraFileContext(file, name, ""));
@@ -285,7 +291,8 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
     if (format != cv::FileStorage::FORMAT_JSON)
       store.writeComment("previz camera '" + camera.name +
                          (camera.dist.isBrown()
-                              ? "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3)"
+                              ? (camera.dist.isRational() ? "': OpenCV Brown-Conrady, rational (k1 k2 p1 p2 k3 k4 k5 k6)"
+                                                          : "': OpenCV Brown-Conrady (k1 k2 p1 p2 k3)")
                               : "': OpenCV fisheye, Kannala-Brandt (k1 k2 k3 k4, cv::fisheye's D)") +
                          "; pixel (0,0) is the centre of the top-left pixel" +
                          (T_world_cam ? "; rvec/tvec map world to camera (x_cam = R x_world + t), metres, "
@@ -297,8 +304,10 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
     // 5x1, as cv::calibrateCamera returns it; a fisheye's 4x1, as cv::fisheye::calibrate does,
     // named by distortion_model (ROS camera_info's key and value).
     const Distortion& d = camera.dist;
-    const cv::Mat D = d.isBrown() ? cv::Mat((cv::Mat_<double>(5, 1) << d.k1, d.k2, d.p1, d.p2, d.k3))
-                                  : cv::Mat((cv::Mat_<double>(4, 1) << d.k1, d.k2, d.k3, d.k4));
+    // 8 coefficients for a rational lens (OpenCV's CALIB_RATIONAL_MODEL D), else 5 as before.
+    const cv::Mat D = !d.isBrown()     ? cv::Mat((cv::Mat_<double>(4, 1) << d.k1, d.k2, d.k3, d.k4))
+                      : d.isRational() ? cv::Mat((cv::Mat_<double>(8, 1) << d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6))
+                                       : cv::Mat((cv::Mat_<double>(5, 1) << d.k1, d.k2, d.p1, d.p2, d.k3));
     if (!camera.dist.isBrown()) store << "distortion_model" << "equidistant";
     store << "camera_matrix" << K;
     store << "distortion_coefficients" << D;

@@ -6,8 +6,10 @@
 // and comparisons on the value are used). Every module that projects through a lens calls these;
 // none writes the polynomial again.
 //
-// Brown–Conrady, OpenCV's convention and coefficient order (k1 k2 p1 p2 k3):
-//   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+// Brown–Conrady, OpenCV's convention and coefficient order (k1 k2 p1 p2 k3 k4 k5 k6), with
+// OpenCV's rational radial factor (CALIB_RATIONAL_MODEL; k4 = k5 = k6 = 0 is the plain model,
+// and gives the same numbers to the last bit: the denominator is then exactly 1):
+//   r2 = x^2 + y^2, radial = (1 + k1 r2 + k2 r2^2 + k3 r2^3) / (1 + k4 r2 + k5 r2^2 + k6 r2^3)
 //   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2)
 //   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
 // Kannala–Brandt equidistant (OpenCV's fisheye module, Kalibr's "equidistant"), k1..k4:
@@ -31,16 +33,30 @@ namespace lens {
 
 // ---- Brown–Conrady ------------------------------------------------------------------------
 
-// radial(r2) = 1 + k1 r2 + k2 r2^2 + k3 r2^3
+// The numerator and denominator of the radial factor and their slopes in r2.
 template <typename T>
-inline T brownRadial(const T& k1, const T& k2, const T& k3, const T& r2) {
-  return T(1) + r2 * (k1 + r2 * (k2 + r2 * k3));
+inline T brownPolynomial(const T& c1, const T& c2, const T& c3, const T& r2) {
+  return T(1) + r2 * (c1 + r2 * (c2 + r2 * c3));
+}
+template <typename T>
+inline T brownPolynomialSlope(const T& c1, const T& c2, const T& c3, const T& r2) {
+  return c1 + r2 * (T(2) * c2 + r2 * (T(3) * c3));
 }
 
-// d radial / d r2
+// radial(r2) = (1 + k1 r2 + k2 r2^2 + k3 r2^3) / (1 + k4 r2 + k5 r2^2 + k6 r2^3)
 template <typename T>
-inline T brownRadialSlope(const T& k1, const T& k2, const T& k3, const T& r2) {
-  return k1 + r2 * (T(2) * k2 + r2 * (T(3) * k3));
+inline T brownRadial(const T& k1, const T& k2, const T& k3, const T& k4, const T& k5, const T& k6,
+                     const T& r2) {
+  return brownPolynomial(k1, k2, k3, r2) / brownPolynomial(k4, k5, k6, r2);
+}
+
+// The radial factor and d radial / d r2 = (N' - radial D') / D.
+template <typename T>
+inline void brownRadialWithSlope(const T& k1, const T& k2, const T& k3, const T& k4, const T& k5,
+                                 const T& k6, const T& r2, T& radial, T& slope) {
+  const T den = brownPolynomial(k4, k5, k6, r2);
+  radial = brownPolynomial(k1, k2, k3, r2) / den;
+  slope = (brownPolynomialSlope(k1, k2, k3, r2) - radial * brownPolynomialSlope(k4, k5, k6, r2)) / den;
 }
 
 // The tangential (decentring) terms.
@@ -53,9 +69,9 @@ inline void brownTangential(const T& p1, const T& p2, const T& x, const T& y, T&
 
 // Ideal normalized -> distorted normalized.
 template <typename T>
-inline void brownDistort(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3, const T& x,
-                         const T& y, T& xd, T& yd) {
-  const T radial = brownRadial(k1, k2, k3, x * x + y * y);
+inline void brownDistort(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3, const T& k4,
+                         const T& k5, const T& k6, const T& x, const T& y, T& xd, T& yd) {
+  const T radial = brownRadial(k1, k2, k3, k4, k5, k6, x * x + y * y);
   T tx, ty;
   brownTangential(p1, p2, x, y, tx, ty);
   xd = x * radial + tx;
@@ -65,10 +81,11 @@ inline void brownDistort(const T& k1, const T& k2, const T& p1, const T& p2, con
 // The same and d(xd, yd) / d(x, y) = [j00 j01; j01 j11] (symmetric) in one pass.
 template <typename T>
 inline void brownDistortWithJacobian(const T& k1, const T& k2, const T& p1, const T& p2, const T& k3,
-                                     const T& x, const T& y, T& xd, T& yd, T& j00, T& j01, T& j11) {
+                                     const T& k4, const T& k5, const T& k6, const T& x, const T& y, T& xd,
+                                     T& yd, T& j00, T& j01, T& j11) {
   const T x2 = x * x, y2 = y * y, xy = x * y, r2 = x2 + y2;
-  const T radial = brownRadial(k1, k2, k3, r2);
-  const T slope = brownRadialSlope(k1, k2, k3, r2);
+  T radial, slope;
+  brownRadialWithSlope(k1, k2, k3, k4, k5, k6, r2, radial, slope);
   T tx, ty;
   brownTangential(p1, p2, x, y, tx, ty);
   xd = x * radial + tx;
@@ -78,20 +95,35 @@ inline void brownDistortWithJacobian(const T& k1, const T& k2, const T& p1, cons
   j11 = radial + T(2) * y2 * slope + T(6) * p1 * y + T(2) * p2 * x;
 }
 
-// d(xd, yd) / d(k1 k2 p1 p2 k3): rows xd, yd, row-major 2 x 5.
+// d(xd, yd) / d(k1 k2 p1 p2 k3 k4 k5 k6) at the given coefficients (the rational terms make
+// the radial ones depend on them): rows xd, yd, row-major 2 x 8, OpenCV's order. With
+// k4 = k5 = k6 = 0 the first five columns are the plain model's to the last bit.
 template <typename T>
-inline void brownCoefficientJacobian(const T& x, const T& y, T* J) {
+inline void brownCoefficientJacobian(const T& k1, const T& k2, const T& k3, const T& k4, const T& k5,
+                                     const T& k6, const T& x, const T& y, T* J) {
   const T r2 = x * x + y * y, r4 = r2 * r2, xy = x * y;
-  J[0] = x * r2;
-  J[1] = x * r4;
+  const T den = brownPolynomial(k4, k5, k6, r2);
+  const T radial = brownPolynomial(k1, k2, k3, r2) / den;
+  // d radial / d k1..k3 = r2^i / D; d radial / d k4..k6 = -radial r2^i / D. (r4 / D) r2, not
+  // r6 / D: the plain model's (x r4) r2, rounded as before.
+  const T n1 = r2 / den, n2 = r4 / den, n3 = n2 * r2;
+  const T d1 = -radial * n1, d2 = -radial * n2, d3 = -radial * n3;
+  J[0] = x * n1;
+  J[1] = x * n2;
   J[2] = T(2) * xy;
   J[3] = r2 + T(2) * x * x;
-  J[4] = x * r4 * r2;
-  J[5] = y * r2;
-  J[6] = y * r4;
-  J[7] = r2 + T(2) * y * y;
-  J[8] = T(2) * xy;
-  J[9] = y * r4 * r2;
+  J[4] = x * n2 * r2;
+  J[5] = x * d1;
+  J[6] = x * d2;
+  J[7] = x * d3;
+  J[8] = y * n1;
+  J[9] = y * n2;
+  J[10] = r2 + T(2) * y * y;
+  J[11] = T(2) * xy;
+  J[12] = y * n2 * r2;
+  J[13] = y * d1;
+  J[14] = y * d2;
+  J[15] = y * d3;
 }
 
 // ---- Kannala–Brandt (equidistant) --------------------------------------------------------

@@ -78,12 +78,13 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
   if (j.contains("distortion")) {
     const auto& d = j.at("distortion");
     const std::string dp = prefix + "distortion.";
-    const char* terms = kb ? "k1 k2 k3 k4" : "k1 k2 p1 p2 k3";
+    const char* terms = kb ? "k1 k2 k3 k4" : "k1 k2 p1 p2 k3 k4 k5 k6";
     if (!d.is_object())
       throw Error(std::string("expected an object of the terms ") + terms + ", got " + typeName(d),
                   cameraFileContext(file, cam, prefix + "distortion"));
     for (auto it = d.begin(); it != d.end(); ++it) {
-      static const std::set<std::string> brown = {"k1", "k2", "p1", "p2", "k3"}, fisheye = {"k1", "k2", "k3", "k4"};
+      static const std::set<std::string> brown = {"k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"},
+                                         fisheye = {"k1", "k2", "k3", "k4"};
       if (!(kb ? fisheye : brown).count(it.key()))
         throw Error(std::string("unsupported distortion term (model ") + toString(c.dist.model) + " has " + terms + ")",
                     cameraFileContext(file, cam, dp + it.key()));
@@ -96,6 +97,8 @@ Camera cameraFromJsonAt(const nlohmann::json& j, const std::string& file, const 
     c.dist.p2 = term("p2");
     c.dist.k3 = term("k3");
     c.dist.k4 = term("k4");
+    c.dist.k5 = term("k5");
+    c.dist.k6 = term("k6");
   }
   try {
     c.validate();
@@ -164,6 +167,12 @@ nlohmann::json cameraToJson(const Camera& c) {
   j["skew"] = c.skew;
   if (c.dist.isBrown()) {
     j["distortion"] = {{"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3}};
+    // The rational terms only on a lens that has them: other files stay as they were.
+    if (c.dist.isRational()) {
+      j["distortion"]["k4"] = c.dist.k4;
+      j["distortion"]["k5"] = c.dist.k5;
+      j["distortion"]["k6"] = c.dist.k6;
+    }
     j["model"] = kModel;
   } else {
     j["distortion"] = {{"k1", c.dist.k1}, {"k2", c.dist.k2}, {"k3", c.dist.k3}, {"k4", c.dist.k4}};

@@ -352,8 +352,7 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
   const auto it = counts.find(model);
   if (it == counts.end()) {
     throw Error(lineTag(line) + "unsupported camera model '" + model +
-                    "' (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV with k4 = k5 = k6 = 0, "
-                    "OPENCV_FISHEYE)",
+                    "' (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV, OPENCV_FISHEYE)",
                 cameraFileContext(file, cam, "MODEL"));
   }
   if (tok.size() != 4 + it->second)
@@ -378,9 +377,11 @@ Camera colmapCamera(const std::vector<std::string>& tok, const fs::path& file, i
   if (model == "OPENCV" || model == "FULL_OPENCV") c.dist = {p[4], p[5], p[6], p[7], 0};
   if (model == "OPENCV_FISHEYE") c.dist = Distortion::kannalaBrandt(p[4], p[5], p[6], p[7]);
   if (model == "FULL_OPENCV") {
+    // fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6: OpenCV's rational model, the same order.
     c.dist.k3 = p[8];
-    if (p[9] != 0 || p[10] != 0 || p[11] != 0)
-      throw Error(lineTag(line) + "k4 k5 k6 (the rational model's denominator) must be zero", cameraFileContext(file, cam, "PARAMS"));
+    c.dist.k4 = p[9];
+    c.dist.k5 = p[10];
+    c.dist.k6 = p[11];
   }
   return c;
 }
@@ -707,6 +708,13 @@ void exportKalibr(const Rig& rig, const fs::path& camchain) {
     const bool kb = c.dist.model == LensModel::kKannalaBrandt;
     if (!kb && c.dist.k3 != 0.0)
       throw Error("Kalibr's radtan model has no k3 (got " + exact(c.dist.k3) + ")", cameraFileContext(camchain, c.name, "distortion.k3"));
+    if (!kb) {
+      const std::pair<const char*, double> rational[] = {{"k4", c.dist.k4}, {"k5", c.dist.k5}, {"k6", c.dist.k6}};
+      for (const auto& [term, v] : rational)
+        if (v != 0.0)
+          throw Error(std::string("Kalibr's radtan model has no rational term ") + term + " (got " + exact(v) + ")",
+                      cameraFileContext(camchain, c.name, std::string("distortion.") + term));
+    }
     out << "cam" << n << ":\n";
     if (n == 0) writeYamlTransform(out, "T_world_cam", rc.T_world_cam);
     else writeYamlTransform(out, "T_cn_cnm1", rc.T_world_cam.inverse() * rig.cameras[n - 1].T_world_cam);
@@ -853,10 +861,13 @@ std::vector<fs::path> exportColmap(const Rig& rig, const fs::path& dir) {
     } else if (c.dist.isZero()) {
       cams << "PINHOLE " << c.width << " " << c.height << " " << exact(c.fx) << " " << exact(c.fy) << " " << cx << " " << cy;
     } else {
-      cams << (c.dist.k3 == 0.0 ? "OPENCV " : "FULL_OPENCV ") << c.width << " " << c.height << " " << exact(c.fx) << " "
+      const bool full = c.dist.k3 != 0.0 || c.dist.isRational();
+      cams << (full ? "FULL_OPENCV " : "OPENCV ") << c.width << " " << c.height << " " << exact(c.fx) << " "
            << exact(c.fy) << " " << cx << " " << cy << " " << exact(c.dist.k1) << " " << exact(c.dist.k2) << " "
            << exact(c.dist.p1) << " " << exact(c.dist.p2);
-      if (c.dist.k3 != 0.0) cams << " " << exact(c.dist.k3) << " 0 0 0";
+      if (full)
+        cams << " " << exact(c.dist.k3) << " " << exact(c.dist.k4) << " " << exact(c.dist.k5) << " "
+             << exact(c.dist.k6);
     }
     cams << "\n";
     const Pose T_cam_world = rc.T_world_cam.inverse();

@@ -100,7 +100,7 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
 
 // Observed minus predicted pixel of a board point, p_world = R_wb p_board + t_wb,
 // p_cam = R_wc^T (p_world - C), projected with core/camera.h's model; and, when asked, its
-// Jacobians (2 x 6, row-major, tangent of the pose as above) and w.r.t. the intrinsics (2 x 10,
+// Jacobians (2 x 6, row-major, tangent of the pose as above) and w.r.t. the intrinsics (2 x 13,
 // calib/detail/projection.h order). false when the point is behind the camera.
 struct Linearized {
   Eigen::Vector2d r;
@@ -127,8 +127,8 @@ bool rigResidual(const double* intr, LensModel model, const Eigen::Matrix3d& R_w
     lens::kannalaBrandtDistortWithJacobian(intr[kK1], intr[kK2], intr[kK3], intr[kK4], x, y, xd, yd, D(0, 0),
                                            D(0, 1), D(1, 1));
   else
-    lens::brownDistortWithJacobian(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd, D(0, 0),
-                                   D(0, 1), D(1, 1));
+    lens::brownDistortWithJacobian(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], intr[kK4], intr[kK5],
+                                   intr[kK6], x, y, xd, yd, D(0, 0), D(0, 1), D(1, 1));
   D(1, 0) = D(0, 1);
   const double fx = intr[kFx], fy = intr[kFy], s = intr[kSkew];
   out.r = px - Eigen::Vector2d(fx * xd + s * yd + intr[kCx], fy * yd + intr[kCy]);
@@ -162,15 +162,18 @@ bool rigResidual(const double* intr, LensModel model, const Eigen::Matrix3d& R_w
     out.J_intr.col(kK4) = Jk.col(3);
     return true;
   }
-  // d(xd, yd) / d(k1 k2 p1 p2 k3), then through K.
-  Eigen::Matrix<double, 2, 5, Eigen::RowMajor> Dk;
-  lens::brownCoefficientJacobian(x, y, Dk.data());
-  const Eigen::Matrix<double, 2, 5> Jk = -K * Dk;
+  // d(xd, yd) / d(k1 k2 p1 p2 k3 k4 k5 k6), then through K.
+  Eigen::Matrix<double, 2, 8, Eigen::RowMajor> Dk;
+  lens::brownCoefficientJacobian(intr[kK1], intr[kK2], intr[kK3], intr[kK4], intr[kK5], intr[kK6], x, y, Dk.data());
+  const Eigen::Matrix<double, 2, 8> Jk = -K * Dk;
   out.J_intr.col(kK1) = Jk.col(0);
   out.J_intr.col(kK2) = Jk.col(1);
   out.J_intr.col(kP1) = Jk.col(2);
   out.J_intr.col(kP2) = Jk.col(3);
   out.J_intr.col(kK3) = Jk.col(4);
+  out.J_intr.col(kK4) = Jk.col(5);
+  out.J_intr.col(kK5) = Jk.col(6);
+  out.J_intr.col(kK6) = Jk.col(7);
   return true;
 }
 
@@ -478,12 +481,14 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
     if (c.pose_fixed) ceres_problem.SetParameterBlockConstant(params.cams[i].data());
     ordering->AddElementToGroup(params.cams[i].data(), 1);
     if (!c.free_intrinsics.empty()) {
-      // Held: what is not free, and the terms the camera's lens model does not have.
+      // Held: what is not free, and the terms the camera's lens model does not have (Brown's k4 k5
+      // k6 are its rational terms: held unless listed free).
       const bool kb = c.camera.dist.model == LensModel::kKannalaBrandt;
       std::vector<int> held;
       for (int k = 0; k < kIntrinsicCount; ++k)
         if (std::find(c.free_intrinsics.begin(), c.free_intrinsics.end(), k) == c.free_intrinsics.end() ||
-            (kb ? (k == calib::detail::kP1 || k == calib::detail::kP2) : k == calib::detail::kK4))
+            (kb && (k == calib::detail::kP1 || k == calib::detail::kP2 || k == calib::detail::kK5 ||
+                    k == calib::detail::kK6)))
           held.push_back(k);
       if (!held.empty()) {
         intrinsic_manifolds.push_back(std::make_unique<ceres::SubsetManifold>(kIntrinsicCount, held));

@@ -14,9 +14,10 @@
 namespace previz::calib::detail {
 
 // Intrinsic vector layout, shared by the solve, the covariance and the reports. The lens model
-// (Camera::dist.model) says which distortion slots are used: Brown–Conrady k1 k2 p1 p2 k3 (k4
-// held at 0), Kannala–Brandt k1 k2 k3 k4 (p1 p2 held at 0); it travels beside the vector.
-enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kSkew, kK1, kK2, kP1, kP2, kK3, kK4, kIntrinsicCount };
+// (Camera::dist.model) says which distortion slots are used: Brown–Conrady k1 k2 p1 p2 k3 and
+// its rational k4 k5 k6 (held unless asked for), Kannala–Brandt k1 k2 k3 k4 (p1 p2 k5 k6 held at
+// 0); it travels beside the vector.
+enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kSkew, kK1, kK2, kP1, kP2, kK3, kK4, kK5, kK6, kIntrinsicCount };
 
 inline void cameraToVector(const Camera& c, double* v) {
   v[kFx] = c.fx;
@@ -30,6 +31,8 @@ inline void cameraToVector(const Camera& c, double* v) {
   v[kP2] = c.dist.p2;
   v[kK3] = c.dist.k3;
   v[kK4] = c.dist.k4;
+  v[kK5] = c.dist.k5;
+  v[kK6] = c.dist.k6;
 }
 
 inline void vectorToCamera(const double* v, LensModel model, Camera& c) {
@@ -45,6 +48,8 @@ inline void vectorToCamera(const double* v, LensModel model, Camera& c) {
   c.dist.p2 = v[kP2];
   c.dist.k3 = v[kK3];
   c.dist.k4 = v[kK4];
+  c.dist.k5 = v[kK5];
+  c.dist.k6 = v[kK6];
 }
 
 // Camera-frame point -> pixel. fy is intr[kFy] unless aspect > 0, in which case fy = aspect * fx
@@ -57,7 +62,8 @@ inline void projectCameraPoint(const T* intr, const T* p, double aspect, LensMod
   if (model == LensModel::kKannalaBrandt)
     lens::kannalaBrandtDistort(intr[kK1], intr[kK2], intr[kK3], intr[kK4], x, y, xd, yd);
   else
-    lens::brownDistort(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], x, y, xd, yd);
+    lens::brownDistort(intr[kK1], intr[kK2], intr[kP1], intr[kP2], intr[kK3], intr[kK4], intr[kK5], intr[kK6], x, y,
+                       xd, yd);
   const T fy = aspect > 0 ? T(aspect) * intr[kFx] : intr[kFy];
   uv[0] = intr[kFx] * xd + intr[kSkew] * yd + intr[kCx];
   uv[1] = fy * yd + intr[kCy];
@@ -75,7 +81,7 @@ inline void projectBoardPoint(const T* intr, const T* pose, const T* p_board, do
   projectCameraPoint(intr, p, aspect, model, uv);
 }
 
-// Pixel and its Jacobian with respect to [intrinsics (11), pose (6)] for one board point.
+// Pixel and its Jacobian with respect to [intrinsics (13), pose (6)] for one board point.
 inline Eigen::Vector2d projectBoardPointJacobian(const double* intr, const double* pose,
                                                  const Eigen::Vector3d& p_board, double aspect, LensModel model,
                                                  Eigen::Matrix<double, 2, kIntrinsicCount + 6>& J) {

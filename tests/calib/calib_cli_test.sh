@@ -87,7 +87,23 @@ else
   fail "rendered fisheye board set: $(tail -5 "$tmp/fishsynth.err")"
 fi
 
+# --model rational on OpenCV's left sample camera: Brown-Conrady with k4 k5 k6 free; the camera
+# JSON carries them, the OpenCV YAML is an 8-term D, the report lists k4..k6.
 real="$data/opencv-chessboard"
+if ls "$real"/left*.jpg >/dev/null 2>&1; then
+  mkdir -p "$tmp/rational_in"; cp "$real"/left*.jpg "$tmp/rational_in/"
+  if "$bin" calib intrinsics --images "$tmp/rational_in" --board "$tmp/board.json" --out "$tmp/rational/left.json" \
+       --model rational --no-cross-validate --quiet 2>"$tmp/stderr_rational.txt"; then
+    grep -q '"k6"' "$tmp/rational/left.json" && ok "rational camera JSON carries k6" \
+      || fail "rational camera JSON: $(head -c 400 "$tmp/rational/left.json")"
+    grep -A1 "distortion_coefficients" "$tmp/rational/left.yaml" | grep -q "rows: 8" && ok "rational OpenCV YAML has 8 coefficients" \
+      || fail "rational YAML: $(grep -A3 distortion_coefficients "$tmp/rational/left.yaml")"
+    grep -q "^  k5 " "$tmp/stderr_rational.txt" && ok "report lists k5" || fail "report lacks k5"
+  else
+    fail "calibrate with --model rational: $(tail -5 "$tmp/stderr_rational.txt")"
+  fi
+fi
+
 if ls "$real"/left*.jpg >/dev/null 2>&1; then
   mkdir -p "$tmp/left"; cp "$real"/left*.jpg "$tmp/left/"
   printf 'this is not a jpeg' > "$tmp/left/left99.jpg"

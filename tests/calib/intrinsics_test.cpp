@@ -24,7 +24,8 @@ using testing::thesisCamera;
 
 double intrinsic(const Camera& c, int k) {
   const double v[kIntrinsicCount] = {c.fx, c.fy, c.cx, c.cy, c.skew,
-                                     c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2, c.dist.k3, c.dist.k4};
+                                     c.dist.k1, c.dist.k2, c.dist.p1, c.dist.p2, c.dist.k3, c.dist.k4,
+                                     c.dist.k5, c.dist.k6};
   return v[k];
 }
 
@@ -101,7 +102,23 @@ TEST(Intrinsics, LocksHoldTheirValuesExactly) {
   // The principal point is held 3.25 px off: the focal length absorbs little of it.
   EXPECT_NEAR(r.camera.fx, truth.fx, 2.0);
 
-  EXPECT_EQ(IntrinsicLocks::parse("fix_distortion").toString(), "fix_k1,fix_k2,fix_k3,fix_k4,fix_tangential");
+  EXPECT_EQ(IntrinsicLocks::parse("fix_distortion").toString(),
+            "fix_k1,fix_k2,fix_k3,fix_k4,fix_k5,fix_k6,fix_tangential");
+  // The rational model: Brown's k4 k5 k6 free with it (fix_k5 still holds one), held without it;
+  // a fisheye never has k5 k6.
+  {
+    const IntrinsicLocks rational = IntrinsicLocks::parse("rational,fix_k5");
+    EXPECT_EQ(rational.toString(), "fix_k5,rational");
+    const auto brown = rational.heldMask(LensModel::kBrownConrady);
+    EXPECT_FALSE(brown[10]);
+    EXPECT_TRUE(brown[11]);
+    EXPECT_FALSE(brown[12]);
+    const auto plain = IntrinsicLocks{}.heldMask(LensModel::kBrownConrady);
+    EXPECT_TRUE(plain[10] && plain[11] && plain[12]);
+    const auto kb = rational.heldMask(LensModel::kKannalaBrandt);
+    EXPECT_FALSE(kb[10]);
+    EXPECT_TRUE(kb[11] && kb[12] && kb[7] && kb[8]);
+  }
   try {
     IntrinsicLocks::parse("fix_k3,fix_k9");
     FAIL() << "expected an error";

@@ -219,6 +219,11 @@ TEST(LensTable, ValidateErrorsNameFieldAndEntry) {
   LensTable fisheye = t;
   fisheye.entries[1].camera.dist = Distortion::kannalaBrandt(0.01, 0, 0, 0);
   EXPECT_EQ(errorField([&] { fisheye.validate(); }), "entries[1].camera.distortion.model");
+  // A rational entry (OpenCV's k4 k5 k6): no lens file has a place for them, and blending two
+  // rational factors is not the factor of the blended terms: refused, naming the term.
+  LensTable rational = t;
+  rational.entries[1].camera.dist.k5 = 0.02;
+  EXPECT_EQ(errorField([&] { rational.validate(); }), "entries[1].camera.distortion.k5");
 }
 
 TEST(LensTable, OwnJsonRoundTripIsExact) {

@@ -51,6 +51,10 @@ void expectSameCamera(const Camera& a, const Camera& b) {
   EXPECT_EQ(a.dist.p1, b.dist.p1);
   EXPECT_EQ(a.dist.p2, b.dist.p2);
   EXPECT_EQ(a.dist.k3, b.dist.k3);
+  EXPECT_EQ(a.dist.k4, b.dist.k4);
+  EXPECT_EQ(a.dist.k5, b.dist.k5);
+  EXPECT_EQ(a.dist.k6, b.dist.k6);
+  EXPECT_EQ(a.dist.model, b.dist.model);
 }
 
 TEST(CameraIo, OpenCvYamlAndXmlRoundTripsAreExact) {
@@ -109,20 +113,93 @@ TEST(CameraIo, ReadsTheFileOpenCvsCalibrationSampleWrites) {
   expected.skew = 0;
   expectSameCamera(expected, c);
 
-  // A rational-model coefficient cannot be represented: refuse, naming the field.
+  // The sample with CALIB_RATIONAL_MODEL: D's k4 k5 k6 are the rational terms, read as they are.
   {
     cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
     distCoeffs.at<double>(5) = 0.01;
+    distCoeffs.at<double>(6) = -0.002;
+    distCoeffs.at<double>(7) = 0.0003;
     fs << "image_width" << truth.width << "image_height" << truth.height << "camera_matrix" << cameraMatrix
        << "distortion_coefficients" << distCoeffs;
   }
+  const Camera rational = readOpenCvCamera(path);
+  EXPECT_EQ(rational.dist.k4, 0.01);
+  EXPECT_EQ(rational.dist.k5, -0.002);
+  EXPECT_EQ(rational.dist.k6, 0.0003);
+  EXPECT_TRUE(rational.dist.isRational());
+
+  // 12 and 14 coefficients (thin prism, tilt): read while those terms are zero; a non-zero one is
+  // refused naming the file, the count and the term.
+  for (const int n : {12, 14}) {
+    cv::Mat D = cv::Mat::zeros(n, 1, CV_64F);
+    for (int i = 0; i < 8; ++i) D.at<double>(i) = distCoeffs.at<double>(i);
+    {
+      cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
+      fs << "image_width" << truth.width << "image_height" << truth.height << "camera_matrix" << cameraMatrix
+         << "distortion_coefficients" << D;
+    }
+    EXPECT_EQ(readOpenCvCamera(path).dist, rational.dist) << n << " coefficients";
+    D.at<double>(n - 1) = 0.001;
+    {
+      cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
+      fs << "image_width" << truth.width << "image_height" << truth.height << "camera_matrix" << cameraMatrix
+         << "distortion_coefficients" << D;
+    }
+    try {
+      readOpenCvCamera(path);
+      FAIL() << n << " coefficients with a non-zero last term accepted";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().field, "distortion_coefficients");
+      EXPECT_EQ(e.context().file, path.string());
+      EXPECT_NE(e.message().find("of " + std::to_string(n)), std::string::npos) << e.message();
+      EXPECT_NE(e.message().find(n == 12 ? "s4" : "tauY"), std::string::npos) << e.message();
+    }
+  }
+  // A length OpenCV does not have is refused naming the count.
+  {
+    cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
+    fs << "image_width" << truth.width << "image_height" << truth.height << "camera_matrix" << cameraMatrix
+       << "distortion_coefficients" << cv::Mat(cv::Mat::zeros(6, 1, CV_64F));
+  }
   try {
     readOpenCvCamera(path);
-    FAIL();
+    FAIL() << "6 coefficients accepted";
   } catch (const Error& e) {
     EXPECT_EQ(e.context().field, "distortion_coefficients");
-    EXPECT_EQ(e.context().file, path.string());
+    EXPECT_NE(e.message().find("got 6"), std::string::npos) << e.message();
   }
+}
+
+// A rational lens written as OpenCV's 8-term D and read back bit for bit; OpenCV reads the same
+// file and projects through it as we do.
+TEST(CameraIo, RationalLensRoundTripsAsOpenCvsEightTermD) {
+  const fs::path path = tmpDir("rational") / "wide.yaml";
+  Camera c = sampleCamera();
+  c.skew = 0;
+  c.dist = {1.8412345678901, 0.6198765432109, 0.000812345, -0.001123456, 0.0212345678, 2.2123456789,
+            1.1198765432, 0.0987654321};
+  writeOpenCvCamera(c, path);
+  expectSameCamera(c, readOpenCvCamera(path));
+  cv::FileStorage fs(path.string(), cv::FileStorage::READ);
+  cv::Mat K, D;
+  fs["camera_matrix"] >> K;
+  fs["distortion_coefficients"] >> D;
+  ASSERT_EQ(D.total(), 8u);
+  const std::vector<cv::Point3d> p = {{0.3, -0.2, 1.0}, {-0.6, 0.35, 1.2}};
+  std::vector<cv::Point2d> theirs;
+  cv::projectPoints(p, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, D, theirs);
+  for (size_t i = 0; i < p.size(); ++i) {
+    const auto ours = c.project(Eigen::Vector3d(p[i].x, p[i].y, p[i].z));
+    ASSERT_TRUE(ours);
+    EXPECT_NEAR(ours->x(), theirs[i].x, 1e-9);
+    EXPECT_NEAR(ours->y(), theirs[i].y, 1e-9);
+  }
+  // A plain lens is still written with 5 coefficients.
+  c.dist.k4 = c.dist.k5 = c.dist.k6 = 0;
+  writeOpenCvCamera(c, path);
+  cv::FileStorage plain(path.string(), cv::FileStorage::READ);
+  plain["distortion_coefficients"] >> D;
+  EXPECT_EQ(D.total(), 5u);
 }
 
 TEST(CameraIo, MalformedOpenCvFilesNameFileAndField) {

@@ -223,6 +223,32 @@ TEST(Camera, ValidateNamesCameraAndField) {
   }
 }
 
+// Brown-Conrady takes OpenCV's rational k4 k5 k6; a Kannala-Brandt lens has no k5 k6 and names
+// the one it was given.
+TEST(Camera, ValidateAcceptsRationalBrownAndNamesKannalaBrandtsK5) {
+  Camera cam;
+  cam.name = "w4";
+  cam.width = 640, cam.height = 480, cam.fx = 500, cam.fy = 500, cam.cx = 320, cam.cy = 240;
+  cam.dist = {0.1, 0.01, 0, 0, 0.001, 0.2, 0.02, 0.002};
+  EXPECT_NO_THROW(cam.validate());
+  EXPECT_TRUE(cam.dist.isRational());
+  cam.dist = Distortion::kannalaBrandt(0.01, 0.0, 0.0, 0.001);
+  EXPECT_NO_THROW(cam.validate());
+  EXPECT_FALSE(cam.dist.isRational());
+  for (const char* term : {"k5", "k6"}) {
+    Camera bad = cam;
+    (std::string(term) == "k5" ? bad.dist.k5 : bad.dist.k6) = 0.01;
+    try {
+      bad.validate();
+      FAIL() << "kannala-brandt with " << term << " accepted";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().camera, "w4");
+      EXPECT_EQ(e.context().field, std::string("distortion.") + term);
+      EXPECT_NE(e.message().find(term), std::string::npos) << e.message();
+    }
+  }
+}
+
 TEST(Camera, InverseOptionsValidateNamesTheField) {
   InverseOptions o;
   EXPECT_NO_THROW(o.validate());

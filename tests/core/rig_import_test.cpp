@@ -94,7 +94,8 @@ RigDiff compareRigs(const Rig& truth, const Rig& back, bool names = true) {
     EXPECT_EQ(a.dist.model, b.dist.model) << a.name;
     const double da[] = {a.fx - b.fx, a.fy - b.fy, a.cx - b.cx, a.cy - b.cy, a.skew - b.skew,
                          a.dist.k1 - b.dist.k1, a.dist.k2 - b.dist.k2, a.dist.p1 - b.dist.p1,
-                         a.dist.p2 - b.dist.p2, a.dist.k3 - b.dist.k3, a.dist.k4 - b.dist.k4};
+                         a.dist.p2 - b.dist.p2, a.dist.k3 - b.dist.k3, a.dist.k4 - b.dist.k4,
+                         a.dist.k5 - b.dist.k5, a.dist.k6 - b.dist.k6};
     for (double x : da) d.intrinsics = std::max(d.intrinsics, std::abs(x));
     const Pose& Ta = truth.cameras[i].T_world_cam;
     const Pose& Tb = back.cameras[i].T_world_cam;
@@ -194,6 +195,34 @@ TEST(RigImport, ColmapExportImportRoundTripsEveryIntrinsicAndPose) {
   const RigImport back = importColmap(dir, {});
   expectRoundTrip("COLMAP text", truth, back.rig);
   EXPECT_TRUE(back.report.warnings.empty()) << back.report.fullReport();
+}
+
+// A rational Brown-Conrady lens (OpenCV's k4 k5 k6) goes to COLMAP as FULL_OPENCV, whose
+// parameters are fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6, and comes back exactly; to OpenCV YAML as an
+// 8-term D; Kalibr's radtan has no place for it: refused naming the camera and the term.
+TEST(RigImport, RationalLensRoundTripsThroughColmapAndOpenCvAndKalibrRefusesIt) {
+  const fs::path dir = tmpDir("rational_roundtrip");
+  Rig truth = sampleRig(without(true, false, false));
+  truth.cameras[2].camera.dist.k4 = 2.2123456789;
+  truth.cameras[2].camera.dist.k5 = 1.1198765432;
+  truth.cameras[2].camera.dist.k6 = 0.0987654321;
+  exportColmap(truth, dir / "colmap");
+  const std::string cameras = readTextFile(dir / "colmap" / "cameras.txt");
+  EXPECT_TRUE(contains(cameras, "3 FULL_OPENCV ")) << cameras;
+  // 12 parameters, ending k3 k4 k5 k6 = 0 2.2123456789 1.1198765432 0.0987654321 (%.17g).
+  EXPECT_TRUE(contains(cameras, " 0 2.2123456788999998 1.1198765432 0.098765432099999995\n")) << cameras;
+  expectRoundTrip("COLMAP FULL_OPENCV rational", truth, importColmap(dir / "colmap", {}).rig);
+  expectRoundTrip("OpenCV YAML rational", truth, importOpenCv(exportOpenCv(truth, dir / "opencv"), {}).rig);
+  Rig kalibr = sampleRig(without(true, true, false));
+  kalibr.cameras[1].camera.dist.k5 = 0.01;
+  try {
+    exportKalibr(kalibr, dir / "camchain.yaml");
+    FAIL() << "a rational lens exported to Kalibr's radtan";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().camera, "witness02");
+    EXPECT_EQ(e.context().field, "distortion.k5");
+  }
+  EXPECT_FALSE(fs::exists(dir / "camchain.yaml"));
 }
 
 TEST(RigImport, KRtAndProjectionRowsRoundTripEveryIntrinsicAndPose) {

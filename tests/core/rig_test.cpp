@@ -84,6 +84,23 @@ TEST(Rig, WriteThenReadIsExact) {
   EXPECT_THROW(back.at("nope"), Error);
 }
 
+// A rational lens writes k4 k5 k6 and reads back bit for bit; a plain lens's rig.json has no k4
+// k5 k6 keys (files written before them are unchanged), and one without them reads as k4..k6 = 0.
+TEST(Rig, RationalTermsRoundTripAndArePresentOnlyWhenNonZero) {
+  Rig rig = sampleRig();
+  rig.cameras[1].camera.dist.k4 = 2.2123456789012345;
+  rig.cameras[1].camera.dist.k5 = 1.1198765432109876;
+  rig.cameras[1].camera.dist.k6 = -0.0987654321098765;
+  const fs::path p = tmpDir("rational") / "rig.json";
+  writeRig(rig, p);
+  const Rig back = readRig(p);
+  for (size_t i = 0; i < 3; ++i) EXPECT_EQ(back.cameras[i].camera.dist, rig.cameras[i].camera.dist) << i;
+  const nlohmann::json j = readJsonFile(p);
+  EXPECT_FALSE(j.at("cameras")[0].at("distortion").contains("k4"));
+  EXPECT_EQ(j.at("cameras")[1].at("distortion").at("k6"), -0.0987654321098765);
+  EXPECT_EQ(j.at("cameras")[1].at("model"), "brown-conrady-opencv");
+}
+
 TEST(Rig, MissingFieldNamesFileCameraAndField) {
   nlohmann::json j = rigToJson(sampleRig());
   j["cameras"][1].erase("fx");
@@ -161,9 +178,14 @@ TEST(Rig, OtherUnitsModelsAndPixelConventionsAreRefused) {
   j = rigToJson(sampleRig());
   j["cameras"][0]["model"] = "kannala-brandt";
   EXPECT_EQ(readError(j, "p1").context().field, "cameras[0].distortion.p1");
+  // Brown-Conrady has k4 k5 k6 (the rational terms) and nothing past them; a fisheye has no k5.
   j = rigToJson(sampleRig());
-  j["cameras"][0]["distortion"]["k4"] = 0.1;
-  EXPECT_EQ(readError(j, "k4").context().field, "cameras[0].distortion.k4");
+  j["cameras"][0]["distortion"]["k7"] = 0.1;
+  EXPECT_EQ(readError(j, "k7").context().field, "cameras[0].distortion.k7");
+  j = rigToJson(sampleRig());
+  j["cameras"][0]["model"] = "kannala-brandt";
+  j["cameras"][0]["distortion"] = {{"k1", 0.01}, {"k2", 0.0}, {"k3", 0.0}, {"k4", 0.0}, {"k5", 0.01}};
+  EXPECT_EQ(readError(j, "kb_k5").context().field, "cameras[0].distortion.k5");
   j = rigToJson(sampleRig());
   j["pixel_origin"] = "pixel (0,0) is the top-left corner";
   EXPECT_EQ(readError(j, "origin").context().field, "pixel_origin");

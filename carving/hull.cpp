@@ -176,6 +176,7 @@ CameraModel makeCameraModel(const RigCamera& rig_camera) {
   m.k5 = c.dist.k5;
   m.k6 = c.dist.k6;
   m.kannala_brandt = c.dist.model == LensModel::kKannalaBrandt;
+  m.rational = c.dist.isRational();
   m.distorted = !c.dist.isZero();
   // 2 % beyond the border: the valid disc must contain every point that lands in the image.
   const double fold = 0.98 * c.maxInvertibleRadius();  // +inf when the lens never folds

@@ -228,8 +228,10 @@ inline DistortEval distortXY(const Distortion& d, double x, double y) {
   DistortEval e;
   if (d.model == LensModel::kKannalaBrandt)
     lens::kannalaBrandtDistort(d.k1, d.k2, d.k3, d.k4, x, y, e.xd, e.yd);
-  else
+  else if (d.isRational())
     lens::brownDistort(d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6, x, y, e.xd, e.yd);
+  else
+    lens::brownDistort<false>(d.k1, d.k2, d.p1, d.p2, d.k3, 0.0, 0.0, 0.0, x, y, e.xd, e.yd);
   return e;
 }
 
@@ -244,9 +246,12 @@ inline Jacobian distortJacobianXY(const Distortion& d, double x, double y) {
   double xd, yd;
   if (d.model == LensModel::kKannalaBrandt)
     lens::kannalaBrandtDistortWithJacobian(d.k1, d.k2, d.k3, d.k4, x, y, xd, yd, j.xx, j.xy, j.yy);
-  else
+  else if (d.isRational())
     lens::brownDistortWithJacobian(d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6, x, y, xd, yd, j.xx, j.xy,
                                    j.yy);
+  else
+    lens::brownDistortWithJacobian<false>(d.k1, d.k2, d.p1, d.p2, d.k3, 0.0, 0.0, 0.0, x, y, xd, yd, j.xx, j.xy,
+                                          j.yy);
   return j;
 }
 
@@ -509,6 +514,7 @@ InverseResult InverseDistortion::newton(const Eigen::Vector2d& target,
 InverseResult InverseDistortion::fixedPoint(const Eigen::Vector2d& target,
                                             const InverseOptions& options) const {
   const Distortion& d = dist_;
+  const bool rational = d.isRational();  // else the plain model: no division per iteration
   const double tx = target.x(), ty = target.y();
   double x = tx, y = ty;
   InverseResult result;
@@ -526,7 +532,8 @@ InverseResult InverseDistortion::fixedPoint(const Eigen::Vector2d& target,
   const double runaway2 = runaway * runaway;
   for (;;) {
     const double r2 = x * x + y * y;
-    const double radial = lens::brownRadial(d.k1, d.k2, d.k3, d.k4, d.k5, d.k6, r2);
+    const double radial = rational ? lens::brownRadial(d.k1, d.k2, d.k3, d.k4, d.k5, d.k6, r2)
+                                   : lens::brownRadial<false>(d.k1, d.k2, d.k3, 0.0, 0.0, 0.0, r2);
     double tanx, tany;
     lens::brownTangential(d.p1, d.p2, x, y, tanx, tany);
     // The residual of the current iterate costs nothing extra: it uses the same terms as the

@@ -33,12 +33,13 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 struct Brown {
   double k1, k2, k3, k4, k5, k6, p1, p2;
   bool kannala_brandt;
+  bool rational;  // Brown–Conrady with k4 k5 k6 (else the plain model, no division)
   double r2_max;  // squared ideal radius where the radial map folds (inf when it never does)
 
   explicit Brown(const Camera& c)
       : k1(c.dist.k1), k2(c.dist.k2), k3(c.dist.k3), k4(c.dist.k4), k5(c.dist.k5), k6(c.dist.k6),
         p1(c.dist.p1), p2(c.dist.p2),
-        kannala_brandt(c.dist.model == LensModel::kKannalaBrandt) {
+        kannala_brandt(c.dist.model == LensModel::kKannalaBrandt), rational(c.dist.isRational()) {
     const double r = c.maxInvertibleRadius();
     r2_max = std::isfinite(r) ? r * r : std::numeric_limits<double>::infinity();
   }
@@ -47,7 +48,8 @@ struct Brown {
   void evaluate(double x, double y, double tx, double ty, double& fx, double& fy, double& j00,
                 double& j01, double& j10, double& j11) const {
     if (kannala_brandt) lens::kannalaBrandtDistortWithJacobian(k1, k2, k3, k4, x, y, fx, fy, j00, j01, j11);
-    else lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, k4, k5, k6, x, y, fx, fy, j00, j01, j11);
+    else if (rational) lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, k4, k5, k6, x, y, fx, fy, j00, j01, j11);
+    else lens::brownDistortWithJacobian<false>(k1, k2, p1, p2, k3, k4, k5, k6, x, y, fx, fy, j00, j01, j11);
     fx -= tx;
     fy -= ty;
     j10 = j01;

@@ -48,6 +48,7 @@ struct CameraModel {
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0, k4 = 0, k5 = 0, k6 = 0;  // core/camera.h's Distortion
   bool distorted = false;
   bool kannala_brandt = false;  // the lens model (core/lens_model.h): else Brown–Conrady
+  bool rational = false;        // Brown–Conrady with k4 k5 k6 (else the plain model, no division)
   // Ideal normalized radius^2 past which a point counts as unseen: just beyond what the image
   // border undistorts to, and inside the lens' invertible domain (past its fold the model maps
   // points back into the image, which would carve with points the camera cannot see).
@@ -67,7 +68,8 @@ struct CameraModel {
   inline void toPixel(double x, double y, double& u, double& v) const {
     double xd = x, yd = y;
     if (kannala_brandt) lens::kannalaBrandtDistort(k1, k2, k3, k4, x, y, xd, yd);
-    else if (distorted) lens::brownDistort(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd);
+    else if (rational) lens::brownDistort(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd);
+    else if (distorted) lens::brownDistort<false>(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd);
     u = fx * xd + skew * yd + cx;
     v = fy * yd + cy;
   }
@@ -82,7 +84,8 @@ struct CameraModel {
     if (distorted) {
       double xd, yd;
       if (kannala_brandt) lens::kannalaBrandtDistortWithJacobian(k1, k2, k3, k4, x, y, xd, yd, a, b, d);
-      else lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd, a, b, d);
+      else if (rational) lens::brownDistortWithJacobian(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd, a, b, d);
+      else lens::brownDistortWithJacobian<false>(k1, k2, p1, p2, k3, k4, k5, k6, x, y, xd, yd, a, b, d);
       c = b;
     }
     J[0] = fx * a + skew * c;

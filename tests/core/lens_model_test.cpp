@@ -69,6 +69,14 @@ TEST(LensModel, ZeroRationalTermsAreThePlainModelBitForBit) {
     lens::brownDistort(k1, k2, p1, p2, k3, 0.0, 0.0, 0.0, x, y, a, b);
     ASSERT_EQ(a, xd);
     ASSERT_EQ(b, yd);
+    // The division-free path Camera takes for a plain lens: the same bits.
+    double c, e, q00, q01, q11;
+    lens::brownDistortWithJacobian<false>(k1, k2, p1, p2, k3, 0.0, 0.0, 0.0, x, y, c, e, q00, q01, q11);
+    ASSERT_EQ(c, xd);
+    ASSERT_EQ(e, yd);
+    ASSERT_EQ(q00, j00);
+    ASSERT_EQ(q01, j01);
+    ASSERT_EQ(q11, j11);
     double J[16];
     lens::brownCoefficientJacobian(k1, k2, k3, 0.0, 0.0, 0.0, x, y, J);
     const double r4 = r2 * r2;

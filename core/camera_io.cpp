@@ -301,16 +301,9 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
     store << "image_width" << camera.width;
     store << "image_height" << camera.height;
     cv::Mat K = (cv::Mat_<double>(3, 3) << camera.fx, camera.skew, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1);
-    // 5x1, as cv::calibrateCamera returns it; a fisheye's 4x1, as cv::fisheye::calibrate does,
-    // named by distortion_model (ROS camera_info's key and value).
-    const Distortion& d = camera.dist;
-    // 8 coefficients for a rational lens (OpenCV's CALIB_RATIONAL_MODEL D), else 5 as before.
-    const cv::Mat D = !d.isBrown()     ? cv::Mat((cv::Mat_<double>(4, 1) << d.k1, d.k2, d.k3, d.k4))
-                      : d.isRational() ? cv::Mat((cv::Mat_<double>(8, 1) << d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6))
-                                       : cv::Mat((cv::Mat_<double>(5, 1) << d.k1, d.k2, d.p1, d.p2, d.k3));
     if (!camera.dist.isBrown()) store << "distortion_model" << "equidistant";
     store << "camera_matrix" << K;
-    store << "distortion_coefficients" << D;
+    store << "distortion_coefficients" << openCvDistortion(camera.dist);
     if (T_world_cam) {
       Eigen::Vector3d rvec, tvec;
       poseToRvecTvec(T_world_cam->inverse(), rvec, tvec);
@@ -325,6 +318,12 @@ void writeOpenCv(const Camera& camera, const Pose* T_world_cam, const fs::path& 
 }
 
 }  // namespace
+
+cv::Mat openCvDistortion(const Distortion& d) {
+  if (!d.isBrown()) return (cv::Mat_<double>(4, 1) << d.k1, d.k2, d.k3, d.k4);
+  if (d.isRational()) return (cv::Mat_<double>(8, 1) << d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6);
+  return (cv::Mat_<double>(5, 1) << d.k1, d.k2, d.p1, d.p2, d.k3);
+}
 
 void writeOpenCvCamera(const Camera& camera, const fs::path& path) { writeOpenCv(camera, nullptr, path); }
 

@@ -14,6 +14,11 @@
 
 namespace previz {
 
+// A lens's distortion_coefficients as OpenCV writes them: 5 x 1 (k1 k2 p1 p2 k3, cv::calibrateCamera),
+// 8 x 1 with the rational terms (CALIB_RATIONAL_MODEL), or a fisheye's 4 x 1 (k1..k4, cv::fisheye;
+// the file then says distortion_model: equidistant, ROS camera_info's key and value).
+cv::Mat openCvDistortion(const Distortion& d);
+
 // OpenCV FileStorage YAML/XML/JSON: image_width, image_height, camera_matrix (3x3),
 // distortion_coefficients (1x4, 1x5, 1x8..; k1 k2 p1 p2 [k3]; higher terms must be zero).
 // Intrinsics only: pose fields are not read (rig_import.h importOpenCv reads them).

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "core/camera_io.h"
 #include "core/error.h"
 #include "core/io.h"
 
@@ -48,7 +49,8 @@ std::vector<fs::path> writeRigYaml(const Rig& rig, const fs::path& dir) {
     try {
       cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
       fs.writeComment("previz rig camera '" + cam.name + "' (" + rc.role +
-                      "): OpenCV Brown-Conrady (k1 k2 p1 p2 k3 [k4 k5 k6]); pixel (0,0) is the centre of the "
+                      "): OpenCV Brown-Conrady (k1 k2 p1 p2 k3 [k4 k5 k6]) or fisheye (distortion_model "
+                      "equidistant, k1 k2 k3 k4); pixel (0,0) is the centre of the "
                       "top-left pixel; R, t, rvec map world to camera (x_cam = R x_world + t), "
                       "world z up, metres");
       fs << "camera_name" << cam.name;
@@ -56,11 +58,9 @@ std::vector<fs::path> writeRigYaml(const Rig& rig, const fs::path& dir) {
       fs << "image_width" << cam.width;
       fs << "image_height" << cam.height;
       fs << "camera_matrix" << toMat(cam.K());
-      cv::Mat D = (cv::Mat_<double>(8, 1) << cam.dist.k1, cam.dist.k2, cam.dist.p1, cam.dist.p2, cam.dist.k3,
-                   cam.dist.k4, cam.dist.k5, cam.dist.k6);
-      // OpenCV's 8-term D (CALIB_RATIONAL_MODEL) only for a lens with the rational terms.
-      if (!cam.dist.isRational()) D = D.rowRange(0, 5).clone();
-      fs << "distortion_coefficients" << D;
+      // A fisheye as cv::fisheye and ROS write it (it was written as a Brown D, dropping k4).
+      if (!cam.dist.isBrown()) fs << "distortion_model" << "equidistant";
+      fs << "distortion_coefficients" << openCvDistortion(cam.dist);
       fs << "R" << toMat(T_cam_world.linear());
       fs << "t" << toMat(tvec);
       fs << "rvec" << toMat(rvec);

@@ -21,7 +21,9 @@ TEST(RigYaml, OpenCvReadsBackIntrinsicsAndWorldToCameraExtrinsics) {
   const fs::path dir = test::scratchDir("multicam_rig_io", "yaml");
   synth::StudioRigOptions o;
   o.witness_cameras = 3;
+  o.fisheye_witnesses = 1;  // a fisheye's file is cv::fisheye's (distortion_model equidistant, 4 x 1 D)
   const Rig rig = synth::studioRig(o, 10.0, false);
+  ASSERT_FALSE(rig.cameras.front().camera.dist.isBrown());
   const std::vector<fs::path> files = writeRigYaml(rig, dir);
   ASSERT_EQ(files.size(), rig.cameras.size());
   for (size_t i = 0; i < rig.cameras.size(); ++i) {
@@ -54,7 +56,19 @@ TEST(RigYaml, OpenCvReadsBackIntrinsicsAndWorldToCameraExtrinsics) {
     EXPECT_LT(cv::norm(R_from_rvec - R), 1e-12);
     const Eigen::Vector3d p_world = synth::witnessAimPoint();
     std::vector<cv::Point2d> px;
-    cv::projectPoints(std::vector<cv::Point3d>{{p_world.x(), p_world.y(), p_world.z()}}, rvec, t, K, D, px);
+    const std::vector<cv::Point3d> points{{p_world.x(), p_world.y(), p_world.z()}};
+    std::string model;
+    fs["distortion_model"] >> model;
+    if (rc.camera.dist.isBrown()) {
+      EXPECT_EQ(model, "");
+      EXPECT_EQ(D.rows, 5);
+      cv::projectPoints(points, rvec, t, K, D, px);
+    } else {
+      EXPECT_EQ(model, "equidistant");
+      ASSERT_EQ(D.rows, 4);
+      EXPECT_DOUBLE_EQ(D.at<double>(3), rc.camera.dist.k4);
+      cv::fisheye::projectPoints(points, px, rvec, t, K, D);
+    }
     const Eigen::Vector2d expected = *rc.camera.project(rc.T_world_cam.inverse() * p_world);
     EXPECT_NEAR(px[0].x, expected.x(), 1e-6);
     EXPECT_NEAR(px[0].y, expected.y(), 1e-6);
@@ -62,6 +76,7 @@ TEST(RigYaml, OpenCvReadsBackIntrinsicsAndWorldToCameraExtrinsics) {
     const Camera back = readOpenCvCamera(files[i], rc.camera.name);
     EXPECT_DOUBLE_EQ(back.fx, rc.camera.fx);
     EXPECT_DOUBLE_EQ(back.dist.k2, rc.camera.dist.k2);
+    EXPECT_TRUE(back.dist == rc.camera.dist);
   }
 }
 

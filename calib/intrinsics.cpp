@@ -1,7 +1,6 @@
 #include "calib/intrinsics.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -13,6 +12,7 @@
 
 #include "calib/detail/projection.h"
 #include "core/error.h"
+#include "core/stopwatch.h"
 #include "core/stats.h"
 
 namespace previz::calib {
@@ -419,7 +419,7 @@ std::optional<Pose> estimateBoardPose(const Camera& camera, const ViewObservatio
 
 IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
                                      const BoardSpec& board, const IntrinsicsOptions& options) {
-  const auto t_start = std::chrono::steady_clock::now();
+  const Stopwatch solve_time;
   options.validate();
   board.validate();
   const auto board_points = boardPointMap(board);
@@ -800,8 +800,7 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<ViewObservations>& views,
   } else if (options.compute_covariance) {
     result.covariance_message = "not enough points for the number of parameters";
   }
-  result.solve_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+  result.solve_ms = solve_time.ms();
   return result;
 }
 

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/names.h"
 #include "core/io.h"
 
 namespace previz {
@@ -143,7 +144,7 @@ void Rig::validate() const {
     if (!seen.insert(rc.camera.name).second)
       throw Error("duplicate camera name", cameraFileContext("", rc.camera.name, prefix + "name"));
     rc.camera.validate();
-    if (rc.role != "witness" && rc.role != "main")
+    if (rc.role != "witness" && rc.role != kMainRole)
       throw Error("role must be \"witness\" or \"main\" (got \"" + rc.role + "\")",
                   cameraFileContext("", rc.camera.name, prefix + "role"));
     const Eigen::Matrix3d R = rc.T_world_cam.linear();
@@ -230,7 +231,7 @@ Rig rigFromJson(const nlohmann::json& j, const std::string& file) {
     if (!seen.insert(name).second)
       throw Error("duplicate camera name (names must be unique in a rig)", cameraFileContext(file, name, prefix + "name"));
     if (cams[i].contains("role")) rc.role = readString(cams[i], "role", prefix, file, name);
-    if (rc.role != "witness" && rc.role != "main")
+    if (rc.role != "witness" && rc.role != kMainRole)
       throw Error("role must be \"witness\" or \"main\" (got \"" + rc.role + "\")", cameraFileContext(file, name, prefix + "role"));
     const auto& pose = require(cams[i], "T_world_cam", prefix, file, name,
                                "a pose {\"R\": [[3],[3],[3]], \"t\": [3]}");

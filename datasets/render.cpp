@@ -8,6 +8,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/threads.h"
 #include "core/lens_model.h"
 #include "datasets/detail/render_kernel.h"
 #include "datasets/random.h"
@@ -15,7 +16,6 @@
 namespace previz::synth {
 namespace {
 
-using detail::threadCount;
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
@@ -265,7 +265,6 @@ inline float floatBelow(double t) {
 
 namespace detail {
 
-int threadCount(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
 struct SpanTracer::Impl {
   Lens lens;
@@ -431,7 +430,7 @@ RenderedView renderView(const Camera& camera, const std::vector<ShutterSample>& 
                         const ShutterSample& centre, const RenderOptions& options) {
   options.validate();
   const Exposure exposure = makeExposure(camera, shutter, centre, options.samples_per_pixel);
-  const int threads = threadCount(options.threads);
+  const int threads = resolveThreads(options.threads);
   const int W = camera.width, H = camera.height;
   const float scale = static_cast<float>(options.gain / exposure.pattern.size());
 
@@ -522,7 +521,7 @@ LinearView renderLinear(const Camera& camera, const std::vector<ShutterSample>& 
   LinearView view;
   view.rgb.create(H, W, CV_32FC3);
   view.depth.create(H, W, CV_32FC1);
-#pragma omp parallel for schedule(dynamic, 2) num_threads(threadCount(threads))
+#pragma omp parallel for schedule(dynamic, 2) num_threads(resolveThreads(threads))
   for (int v = 0; v < H; ++v) {
     float* rgb = view.rgb.ptr<float>(v);
     float* depth = view.depth.ptr<float>(v);

@@ -5,7 +5,6 @@
 #include <cmath>
 #include <map>
 #include <memory>
-#include <thread>
 
 #include <ceres/ceres.h>
 #include <Eigen/Cholesky>
@@ -14,6 +13,7 @@
 
 #include "calib/detail/projection.h"
 #include "core/error.h"
+#include "core/threads.h"
 #include "core/lens_model.h"
 #include "core/stats.h"
 #include "multicam/detail/bundle.h"
@@ -526,8 +526,7 @@ BundleStats solveBundle(BundleProblem& problem, const BundleOptions& options) {
   solver_options.function_tolerance = 1e-10;
   solver_options.gradient_tolerance = 1e-12;
   solver_options.parameter_tolerance = 1e-10;
-  solver_options.num_threads =
-      options.threads > 0 ? options.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  solver_options.num_threads = resolveThreads(options.threads);
 
   if (ceres_problem.NumResidualBlocks() == 0) {
     params.writeBack(problem);

@@ -17,9 +17,6 @@
 
 namespace previz::synth::detail {
 
-// OpenMP thread count for a render: 'requested', or OpenMP's default when 0.
-int threadCount(int requested);
-
 // Linear RGB of pixel spans of one camera at one pose (static scene): renderView's samples (the
 // same lens inversion warm-started along the row, sample pattern, double sums and float scale,
 // gain folded in), without the truth ray. A span's first pixel starts the inversion cold, so a

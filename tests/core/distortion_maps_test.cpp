@@ -64,8 +64,13 @@ cv::Vec2d sampleBilinear(const cv::Mat& map, double x, double y) {
 // undistort map: pinhole pixel -> lens pixel; distort map: lens pixel -> pinhole pixel.
 // Composing them (undistort map sampled where the distort map points) must bring every lens
 // pixel back to itself.
+// Every lens model (core/lens_model.h) through the same maps: Brown–Conrady barrel and
+// pincushion, its rational form (OpenCV's k4 k5 k6), and a Kannala–Brandt fisheye (about 92 degrees
+// across this frame's diagonal, all of it inside the overscanned pinhole).
 TEST(DistortionMaps, UndistortMapAfterDistortMapIsTheIdentityBelowAMilliPixel) {
-  for (const Distortion& d : {kBarrel, Distortion{0.3, -0.05, -0.002, 0.001, 0.01}}) {
+  for (const Distortion& d : {kBarrel, Distortion{0.3, -0.05, -0.002, 0.001, 0.01},
+                              Distortion{-0.1, 0.04, 0.001, -0.0015, 0.0, 0.15, 0.02, 0.001},
+                              Distortion::kannalaBrandt(0.021, -0.0065, 0.0012, -0.00011)}) {
     const Camera l = lens(d);
     const Camera p = idealPinhole(l, 0.4);  // barrel: the lens corners reach far out in the pinhole
     const cv::Mat U = makeUndistortMap(l, p);
@@ -81,7 +86,8 @@ TEST(DistortionMaps, UndistortMapAfterDistortMapIsTheIdentityBelowAMilliPixel) {
         const cv::Vec2d q = sampleBilinear(U, src[0], src[1]);
         worst = std::max(worst, std::hypot(q[0] - u, q[1] - v));
       }
-    std::cout << "k1=" << d.k1 << ": map composition max error " << worst << " px (bilinear + float)\n";
+    std::cout << toString(d.model) << (d.isRational() ? " (rational)" : "") << " k1=" << d.k1
+              << ": map composition max error " << worst << " px (bilinear + float)\n";
     EXPECT_LT(worst, 1e-3);
     // The distort map itself against the analytic inverse (double precision).
     double worst_map = 0;

@@ -58,7 +58,10 @@ std::vector<std::string> splitNames(const std::string& s) {
   return out;
 }
 
+std::atomic<std::uint64_t> imgcodecs_calls{0};
+
 const detail::ImgcodecsPlugin& imgcodecs() {
+  ++imgcodecs_calls;
   return pluginInterface<detail::ImgcodecsPlugin>("previz_imgcodecs", "previz_imgcodecs_plugin",
                                                   "image formats other than PNG, JPEG and EXR: OpenCV's imgcodecs");
 }
@@ -79,6 +82,8 @@ bool injectedWriteFault(const fs::path& path) {
 }
 
 }  // namespace
+
+std::uint64_t detail::imgcodecsPluginCalls() { return imgcodecs_calls.load(); }
 
 void setWriteFaultHook(WriteFaultHook hook) {
   std::lock_guard<std::mutex> lock(writeFaultMutex());

@@ -36,4 +36,9 @@ cv::Size checkedImageSize(std::uint64_t width, std::uint64_t height);
 // formats cannot hold (2 or more than 4 channels).
 std::optional<std::string> encodeImage(const std::string& ext, const cv::Mat& image);
 
+// How many images this process has read or written through the previz_imgcodecs plugin
+// (core/io.cpp), so that a test can say which calls went to OpenCV whatever ran before it in the
+// same process (pluginLoaded only says whether anything ever did).
+std::uint64_t imgcodecsPluginCalls();
+
 }  // namespace previz::detail

@@ -39,6 +39,7 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
   // 1. Detect the board in every image: read in order (one thread), detected in parallel a batch
   // at a time so that a long video never sits in memory whole.
   std::vector<ViewObservations> views(static_cast<size_t>(images.count));
+  std::vector<char> unreadable(views.size(), 0);  // per view: its image could not be read
   const int batch = 2 * options.threads;
   std::vector<cv::Mat> held(static_cast<size_t>(batch));
   std::vector<std::string> names(static_cast<size_t>(batch));
@@ -61,6 +62,7 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
         v.source = names[k];
         v.failure = "unreadable (skipped): " + why;
         out.unreadable.push_back(names[k]);
+        unreadable[first + k] = 1;
       }
     }
     std::vector<std::exception_ptr> errors(static_cast<size_t>(n));
@@ -97,8 +99,10 @@ PipelineResult calibratePipeline(const ImageSet& images, const BoardSpec& board,
 
   // 2. Reject soft views (focus measure).
   out.soft = options.reject_soft ? rejectSoftViews(views) : 0;
-  for (const auto& v : views) {
-    if (!v.found()) out.log.push_back((v.failure.rfind("unreadable", 0) == 0 ? "" : "no board in ") + v.source + ": " + v.failure);
+  for (size_t i = 0; i < views.size(); ++i) {
+    const ViewObservations& v = views[i];
+    if (unreadable[i]) out.log.push_back(v.source + ": " + v.failure);
+    else if (!v.found()) out.log.push_back("no board in " + v.source + ": " + v.failure);
     else if (v.rejected) out.log.push_back("not using " + v.source + ": " + v.rejected_reason);
   }
   out.log.push_back("board found in " + std::to_string(out.found) + " of " + std::to_string(views.size()) +

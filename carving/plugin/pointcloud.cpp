@@ -1,6 +1,8 @@
 // The previz_pointcloud plugin: PCL behind carving/pointcloud.cpp (detail/pointcloud_plugin.h).
 #include <algorithm>
+#include <cstdint>
 
+#include <pcl/conversions.h>
 #include <pcl/features/normal_3d.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
@@ -65,18 +67,25 @@ int writePcd(const std::string& file, const SurfacePoints& cloud) {
   return pc.empty() ? pcl::io::savePCDFileASCII(file, pc) : pcl::io::savePCDFileBinary(file, pc);
 }
 
-int readPcd(const std::string& file, SurfacePoints& cloud) {
+// The points of a file read as PCL's untyped blob. PCL 1.13's fromPCLPointCloud2 takes &cloud[0]
+// even of an empty cloud (undefined behaviour; UBSan reports it in the typed loadPCDFile /
+// loadPLYFile), so a file without points is not converted: it reads as an empty cloud.
+int fromBlob(int rc, const pcl::PCLPointCloud2& blob, SurfacePoints& cloud) {
+  if (rc < 0) return rc;
   pcl::PointCloud<pcl::PointNormal> pc;
-  const int rc = pcl::io::loadPCDFile(file, pc);
-  if (rc >= 0) cloud = fromPcl(pc);
+  if (static_cast<std::uint64_t>(blob.width) * blob.height > 0) pcl::fromPCLPointCloud2(blob, pc);
+  cloud = fromPcl(pc);
   return rc;
 }
 
+int readPcd(const std::string& file, SurfacePoints& cloud) {
+  pcl::PCLPointCloud2 blob;
+  return fromBlob(pcl::io::loadPCDFile(file, blob), blob, cloud);
+}
+
 int readPly(const std::string& file, SurfacePoints& cloud) {
-  pcl::PointCloud<pcl::PointNormal> pc;
-  const int rc = pcl::io::loadPLYFile(file, pc);
-  if (rc >= 0) cloud = fromPcl(pc);
-  return rc;
+  pcl::PCLPointCloud2 blob;
+  return fromBlob(pcl::io::loadPLYFile(file, blob), blob, cloud);
 }
 
 const detail::PointCloudPlugin kPlugin{detail::PointCloudPlugin::kVersion, pcaNormals, writePly, writePcd, readPcd,

@@ -856,7 +856,7 @@ Runner addRunCommand(CLI::App& app) {
   cmd->add_option("--frames", a->frames, "Frames A:B (A inclusive, B exclusive), A:, :B or A");
   cmd->add_option("--live", a->live,
                   "Read cameras live through OpenCV VideoCapture: NAME=SOURCE per camera (device index, "
-                  "video file or GStreamer pipeline); late frames are dropped and counted (repeatable)");
+                  "/dev/videoN, video file or stream URL through FFmpeg, or a GStreamer pipeline); late frames are dropped and counted (repeatable)");
   cmd->add_flag("--no-pace", a->no_pace, "Live: process every frame (files), never drop");
   cmd->add_option("--live-fps", a->live_fps, "Live: camera rate for pacing (default: the main source's)");
   cmd->add_flag("--meshes", a->meshes, "Also write the hull mesh of every frame (mesh/%06d.ply)");

@@ -679,11 +679,15 @@ std::unique_ptr<detail::VideoFileReader> openReader(const fs::path& path, int pr
 
 std::unique_ptr<detail::LiveCapture> openLive(const std::string& source) {
   auto c = std::make_unique<Capture>();
-  // A device index, a GStreamer pipeline, or anything FFmpeg opens (files, rtsp://, udp://, ...).
-  const bool index = source.find_first_not_of("0123456789") == std::string::npos;
-  const bool opened = index ? c->capture.open(std::stoi(source))
-                            : c->capture.open(source, source.find('!') != std::string::npos ? cv::CAP_GSTREAMER
-                                                                                            : cv::CAP_ANY);
+  // A device index (OpenCV's choice of backend: V4L2 here), a GStreamer pipeline, a V4L2 device
+  // path, or anything FFmpeg opens (files, rtsp://, udp://, ...), each with its backend named.
+  // CAP_ANY on a path would also probe the other backends in turn; gPhoto2's enumerates USB and
+  // leaks what libusb returns on every open that fails (found by scripts/sanitize.sh).
+  const bool index = !source.empty() && source.find_first_not_of("0123456789") == std::string::npos;
+  const int backend = source.find('!') != std::string::npos ? cv::CAP_GSTREAMER
+                      : source.rfind("/dev/", 0) == 0       ? cv::CAP_V4L2
+                                                            : cv::CAP_FFMPEG;
+  const bool opened = index ? c->capture.open(std::stoi(source)) : c->capture.open(source, backend);
   if (!opened) return nullptr;
   return c;
 }

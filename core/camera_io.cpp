@@ -111,6 +111,13 @@ cv::FileStorage openOpenCvStorage(const fs::path& path) {
   // OpenCV refuses YAML without its "%YAML:1.0" first line; ROS camera_info files and hand-written
   // ones have none.
   if ((ext == ".yml" || ext == ".yaml") && text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n" + text;
+  // OpenCV 4.6 reads a text that starts with "<?xml" (after an optional UTF-8 byte order mark) as
+  // XML, whatever format it was asked for, and its XML reader dereferences null when the text ends
+  // inside a tag just after an '=' ('<T type_id=' at the end: a file cut short;
+  // fuzz/corpus/opencv_camera/segv-truncated-tag.xml). Every complete XML document ends with '>'.
+  const size_t start = text.find_first_not_of(" \t\r\n", text.rfind("\xEF\xBB\xBF", 0) == 0 ? 3 : 0);
+  if (start != std::string::npos && text[start] == '<' && text[text.find_last_not_of(" \t\r\n")] != '>')
+    throw Error("XML text that does not end with '>': a file cut short?", cameraFileContext(path, "", ""));
   cv::FileStorage store;
   try {
     if (!store.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | format))

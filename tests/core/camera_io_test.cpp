@@ -221,6 +221,33 @@ TEST(CameraIo, MalformedOpenCvFilesNameFileAndField) {
   EXPECT_THROW(readOpenCvCamera(dir / "absent.yml"), Error);
 }
 
+// A camera file cut short inside an XML tag (found by fuzz/opencv_camera.cpp: OpenCV 4.6's XML
+// reader dereferenced null) is refused naming the file, whatever its extension says.
+TEST(CameraIo, XmlCutShortInsideATagIsRefusedNamingTheFile) {
+  const fs::path dir = tmpDir("cut");
+  writeOpenCvCamera(sampleCamera(), dir / "whole.xml");
+  const std::string whole = readTextFile(dir / "whole.xml");
+  const std::string cut = whole.substr(0, whole.rfind("type_id=") + 8);
+  ASSERT_GT(cut.size(), 8u);
+  for (const auto& [name, text] : {std::pair<std::string, std::string>{"cut.xml", cut},
+                                   {"cut-bom.json", "\xEF\xBB\xBF" + cut},
+                                   {"cut-newline.xml", cut + "\n  \n"},
+                                   {"cut-tag.xml", whole.substr(0, whole.rfind('<') + 2)}}) {
+    SCOPED_TRACE(name);
+    writeFileAtomic(dir / name, text);
+    try {
+      readOpenCvCamera(dir / name);
+      FAIL() << "read a file cut short";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().file, (dir / name).string());
+      EXPECT_NE(std::string(e.what()).find("cut short"), std::string::npos) << e.what();
+    }
+  }
+  // The whole file, with spaces after its last '>', still reads.
+  writeFileAtomic(dir / "whole-spaces.xml", whole + "\n\n  ");
+  expectSameCamera(sampleCamera(), readOpenCvCamera(dir / "whole-spaces.xml"));
+}
+
 Eigen::Matrix3d randomRotation(std::mt19937& rng) {
   std::normal_distribution<double> g(0, 1);
   Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));

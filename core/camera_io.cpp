@@ -67,6 +67,14 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
     if (line.compare(column, 3, "---") == 0) {
       root = std::string::npos;  // a new document
       end_line = 0;
+      // Text after the marker ("--- {a: 1}", "---a: 1") is the document's first node, at its own
+      // column: "--- a: 1\n.0\n-" hung OpenCV's reader as a dedent does
+      // (fuzz/corpus/opencv_camera/hang-document-start-text.yaml).
+      if (const size_t rest = line.find_first_not_of(" \t\r", column + 3);
+          rest != std::string::npos && line[rest] != '#') {
+        root = rest;
+        root_line = number;
+      }
       continue;
     }
     if (end_line)

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <tuple>
+#include <vector>
 
 #include <Eigen/SVD>
 #include <gtest/gtest.h>
@@ -246,6 +248,35 @@ TEST(CameraIo, XmlCutShortInsideATagIsRefusedNamingTheFile) {
   // The whole file, with spaces after its last '>', still reads.
   writeFileAtomic(dir / "whole-spaces.xml", whole + "\n\n  ");
   expectSameCamera(sampleCamera(), readOpenCvCamera(dir / "whole-spaces.xml"));
+}
+
+// YAML shapes that OpenCV 4.6's reader never returns from (found by fuzz/opencv_camera.cpp) are
+// refused before it sees them, naming the file and line; nothing a YAML writer puts there is.
+TEST(CameraIo, YamlThatHangsOpenCvIsRefusedNamingTheLine) {
+  const fs::path dir = tmpDir("yaml_hangs");
+  const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
+      {"dedent.yaml", "%YAML:1.0\n M: 0\n0\n0\n", "line 3 starts left of the first key"},
+      {"after-end.yaml", "a: 1\n...-]\n-\n", "line 2 has text after the document end"},
+      {"start-text.yaml", "%YAML:1.0\n--- a: 1\n.0\n-\n", "line 3 starts left of the first key"},
+      {"start-glued.yaml", "%YAML:1.0\n---ht: 48480\n.0\n--x\n", "line 3 starts left of the first key"}};
+  for (const auto& [name, text, what] : cases) {
+    SCOPED_TRACE(name);
+    writeFileAtomic(dir / name, text);
+    try {
+      readOpenCvCamera(dir / name);
+      FAIL() << "read " << name;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.context().file, (dir / name).string());
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  }
+  // A comment after the document start, as people write one, still reads.
+  writeOpenCvCamera(sampleCamera(), dir / "whole.yml");
+  std::string whole = readTextFile(dir / "whole.yml");
+  const size_t start = whole.find("---\n");
+  ASSERT_NE(start, std::string::npos);
+  writeFileAtomic(dir / "comment.yml", whole.replace(start, 4, "--- # witness 3, re-shot\n"));
+  expectSameCamera(sampleCamera(), readOpenCvCamera(dir / "comment.yml"));
 }
 
 Eigen::Matrix3d randomRotation(std::mt19937& rng) {

@@ -67,14 +67,12 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
     if (line.compare(column, 3, "---") == 0) {
       root = std::string::npos;  // a new document
       end_line = 0;
-      // Text after the marker ("--- {a: 1}", "---a: 1") is the document's first node, at its own
-      // column: "--- a: 1\n.0\n-" hung OpenCV's reader as a dedent does
-      // (fuzz/corpus/opencv_camera/hang-document-start-text.yaml).
+      // Text after the marker ("--- {a: 1}", "---a: 1") sent OpenCV's reader into loops that
+      // never return ("--- a: 1\n.0\n-", "---L:0\n----\n\xff"; fuzz/corpus/opencv_camera/
+      // hang-document-start-*.yaml). No camera file has any: it is refused, naming the line.
       if (const size_t rest = line.find_first_not_of(" \t\r", column + 3);
-          rest != std::string::npos && line[rest] != '#') {
-        root = rest;
-        root_line = number;
-      }
+          rest != std::string::npos && line[rest] != '#')
+        refuse(number, "has text after the document start '---': put it on a line of its own");
       continue;
     }
     if (end_line)

@@ -257,8 +257,9 @@ TEST(CameraIo, YamlThatHangsOpenCvIsRefusedNamingTheLine) {
   const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
       {"dedent.yaml", "%YAML:1.0\n M: 0\n0\n0\n", "line 3 starts left of the first key"},
       {"after-end.yaml", "a: 1\n...-]\n-\n", "line 2 has text after the document end"},
-      {"start-text.yaml", "%YAML:1.0\n--- a: 1\n.0\n-\n", "line 3 starts left of the first key"},
-      {"start-glued.yaml", "%YAML:1.0\n---ht: 48480\n.0\n--x\n", "line 3 starts left of the first key"}};
+      {"start-text.yaml", "%YAML:1.0\n--- a: 1\n.0\n-\n", "line 2 has text after the document start"},
+      {"start-glued.yaml", "%YAML:1.0\n---ht: 48480\n.0\n--x\n", "line 2 has text after the document start"},
+      {"start-dashes.yaml", "%YAML:1.0\n---\nL: 0\n----\n\xff\n", "line 4 has text after the document start"}};
   for (const auto& [name, text, what] : cases) {
     SCOPED_TRACE(name);
     writeFileAtomic(dir / name, text);

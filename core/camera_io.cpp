@@ -43,11 +43,14 @@ RigCamera rigCameraFromKRt(const Eigen::Matrix3d& K, const Eigen::Matrix3d& R, c
   return rc;
 }
 
-// OpenCV 4.6's YAML reader never returns from some files whose lines go left of the first key
-// ("%YAML:1.0\n M:-0\n0\n0": the root map at column 1, then two lines at column 0; found by
-// fuzz/opencv_camera.cpp, fuzz/corpus/opencv_camera/hang-dedent-*.yaml). Such a line is not YAML
-// either (nothing but comments, directives and document markers may sit left of the root
-// collection), so it is refused before OpenCV sees it, naming the line.
+// OpenCV 4.6's YAML reader never returns from some files whose top level is not at column 1,
+// all found by fuzz/opencv_camera.cpp (fuzz/corpus/opencv_camera/hang-*.yaml):
+//   "%YAML:1.0\n M:-0\n0\n0"      the root map at column 2, then lines left of it;
+//   " L: 1\n---\n -"               a second document after an indented one;
+//   "--- a: 1\n.0\n-"              the first key on the document-start line.
+// Camera files (OpenCV's, ROS's, Kalibr's, hand-written ones) start each document's top-level
+// keys at column 1 on a line of their own, so any other shape is refused before OpenCV sees it,
+// naming the line.
 // The same reader also never returns when a document end marker "..." is followed by anything
 // but "---" or the end (it loops on a '-': "a: 1\n...-]\n-", fuzz/corpus/opencv_camera/
 // hang-after-document-end.yaml): text after "..." is refused too.
@@ -57,22 +60,19 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
   };
   std::istringstream in(text);
   std::string line;
-  size_t root = std::string::npos;  // column of the document's first key
-  int root_line = 0, end_line = 0;   // end_line: the last "..." not yet followed by "---"
+  bool document_start = true;  // the next line of content is a document's first
+  int end_line = 0;            // the last "..." not yet followed by "---"
   for (int number = 1; std::getline(in, line); ++number) {
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     const size_t column = line.find_first_not_of(' ');
     const char c = line[column];
     if (c == '#' || c == '%') continue;
     if (line.compare(column, 3, "---") == 0) {
-      root = std::string::npos;  // a new document
-      end_line = 0;
-      // Text after the marker ("--- {a: 1}", "---a: 1") sent OpenCV's reader into loops that
-      // never return ("--- a: 1\n.0\n-", "---L:0\n----\n\xff"; fuzz/corpus/opencv_camera/
-      // hang-document-start-*.yaml). No camera file has any: it is refused, naming the line.
-      if (const size_t rest = line.find_first_not_of(" \t\r", column + 3);
-          rest != std::string::npos && line[rest] != '#')
+      const size_t rest = line.find_first_not_of(" \t\r", column + 3);
+      if (rest != std::string::npos && line[rest] != '#')
         refuse(number, "has text after the document start '---': put it on a line of its own");
+      document_start = true;
+      end_line = 0;
       continue;
     }
     if (end_line)
@@ -81,17 +81,14 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
       const size_t rest = line.find_first_not_of(" \t\r", column + 3);
       if (rest != std::string::npos && line[rest] != '#')
         refuse(number, "has text after the document end '...': not YAML");
-      root = std::string::npos;
+      document_start = true;
       end_line = number;
       continue;
     }
-    if (root == std::string::npos) {
-      root = column;
-      root_line = number;
-    } else if (column < root) {
-      refuse(number, "starts left of the first key (line " + std::to_string(root_line) + ", column " +
-                         std::to_string(root + 1) + "): not YAML");
-    }
+    if (document_start && column > 0)
+      refuse(number, "starts the document at column " + std::to_string(column + 1) +
+                         ": a camera file's top-level keys start the line");
+    document_start = false;
   }
 }
 

@@ -255,7 +255,8 @@ TEST(CameraIo, XmlCutShortInsideATagIsRefusedNamingTheFile) {
 TEST(CameraIo, YamlThatHangsOpenCvIsRefusedNamingTheLine) {
   const fs::path dir = tmpDir("yaml_hangs");
   const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
-      {"dedent.yaml", "%YAML:1.0\n M: 0\n0\n0\n", "line 3 starts left of the first key"},
+      {"dedent.yaml", "%YAML:1.0\n M: 0\n0\n0\n", "line 2 starts the document at column 2"},
+      {"second-document.yaml", " L: 1\n---\n -\n", "line 1 starts the document at column 2"},
       {"after-end.yaml", "a: 1\n...-]\n-\n", "line 2 has text after the document end"},
       {"start-text.yaml", "%YAML:1.0\n--- a: 1\n.0\n-\n", "line 2 has text after the document start"},
       {"start-glued.yaml", "%YAML:1.0\n---ht: 48480\n.0\n--x\n", "line 2 has text after the document start"},

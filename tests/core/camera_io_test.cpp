@@ -223,6 +223,17 @@ TEST(CameraIo, MalformedOpenCvFilesNameFileAndField) {
   EXPECT_THROW(readOpenCvCamera(dir / "absent.yml"), Error);
 }
 
+// Reading `file` throws an Error that names it, with `what` in its message.
+void expectRefused(const fs::path& file, const std::string& what) {
+  try {
+    readOpenCvCamera(file);
+    FAIL() << "read " << file;
+  } catch (const Error& e) {
+    EXPECT_EQ(e.context().file, file.string());
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
 // A camera file cut short inside an XML tag (found by fuzz/opencv_camera.cpp: OpenCV 4.6's XML
 // reader dereferenced null) is refused naming the file, whatever its extension says.
 TEST(CameraIo, XmlCutShortInsideATagIsRefusedNamingTheFile) {
@@ -237,13 +248,7 @@ TEST(CameraIo, XmlCutShortInsideATagIsRefusedNamingTheFile) {
                                    {"cut-tag.xml", whole.substr(0, whole.rfind('<') + 2)}}) {
     SCOPED_TRACE(name);
     writeFileAtomic(dir / name, text);
-    try {
-      readOpenCvCamera(dir / name);
-      FAIL() << "read a file cut short";
-    } catch (const Error& e) {
-      EXPECT_EQ(e.context().file, (dir / name).string());
-      EXPECT_NE(std::string(e.what()).find("cut short"), std::string::npos) << e.what();
-    }
+    expectRefused(dir / name, "cut short");
   }
   // The whole file, with spaces after its last '>', still reads.
   writeFileAtomic(dir / "whole-spaces.xml", whole + "\n\n  ");
@@ -264,13 +269,7 @@ TEST(CameraIo, YamlThatHangsOpenCvIsRefusedNamingTheLine) {
   for (const auto& [name, text, what] : cases) {
     SCOPED_TRACE(name);
     writeFileAtomic(dir / name, text);
-    try {
-      readOpenCvCamera(dir / name);
-      FAIL() << "read " << name;
-    } catch (const Error& e) {
-      EXPECT_EQ(e.context().file, (dir / name).string());
-      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
-    }
+    expectRefused(dir / name, what);
   }
   // A comment after the document start, as people write one, still reads.
   writeOpenCvCamera(sampleCamera(), dir / "whole.yml");

@@ -321,6 +321,15 @@ int garbageLikeness(const GarbageModel& gm, float r, float g, float b) {
   return likeness;
 }
 
+// Sets every pixel of m outside r (within m) to 0.
+void zeroOutside(cv::Mat& m, const cv::Rect& r) {
+  const int W = m.cols, H = m.rows;
+  if (r.y > 0) m.rowRange(0, r.y).setTo(0);
+  if (r.br().y < H) m.rowRange(r.br().y, H).setTo(0);
+  if (r.x > 0) m(cv::Rect(0, r.y, r.x, r.height)).setTo(0);
+  if (r.br().x < W) m(cv::Rect(r.br().x, r.y, W - r.br().x, r.height)).setTo(0);
+}
+
 // Screen test of one row, 16 pixels per step: kScreen where the chroma and the green's range say
 // screen, kUnknown elsewhere (decided by the scalar pass). range: per-pixel (min, max) green
 // (plate) or null (min = tables.min_green8, no max).
@@ -1220,8 +1229,10 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
     full_reason = "periodic whole frame";
   else if (foregroundOutside(f, region_)) full_reason = "foreground outside the region";
   if (full_reason == nullptr) {
-    result.silhouette.setTo(0);
-    alpha8_.setTo(0);
+    // keyRegion writes every pixel of the region: only the rest is cleared (the alpha only
+    // when it is returned; a witness's is never read outside the region).
+    zeroOutside(result.silhouette, region_);
+    if (options_.soft_alpha) zeroOutside(alpha8_, region_);
     keyRegion(f, region_, result);
     if (reachesEdge(result.silhouette, region_)) full_reason = "silhouette reached the region's edge";
   }
@@ -1232,7 +1243,10 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
   // The next frame's region: this silhouette's box, grown by the margin (none when empty: the
   // next frame is keyed whole, which also finds an actor walking in).
   if (options_.region_margin_px > 0) {
-    const cv::Rect box = cv::boundingRect(result.silhouette);
+    // Within what was keyed: the silhouette is empty elsewhere.
+    const cv::Rect keyed = full_reason != nullptr ? whole : region_;
+    cv::Rect box = cv::boundingRect(result.silhouette(keyed));
+    if (!box.empty()) box += keyed.tl();
     const int m = options_.region_margin_px;
     region_ = box.empty() ? cv::Rect() : (cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & whole);
   }

@@ -70,6 +70,7 @@ struct DemoArgs {
   std::string size;
   int frames = 12;
   int cams = 8;
+  int fisheye_witnesses = 0;  // the first N witnesses with a fisheye lens
   std::uint64_t seed = 1;
   int views = 12;        // intrinsics board views per camera
   int select = 0;        // calibrate from the N most informative of them (0 = every usable view)
@@ -194,6 +195,9 @@ std::vector<CameraCalib> calibrateCameras(const synth::SynthOptions& studio, con
     pipeline.board_source = (take / "board.json").string();
     pipeline.select = select;
     pipeline.solve.camera_name = name;
+    // The lens type is the studio's to say (a fisheye witness is bought as one): the model the
+    // camera was built with; its terms are solved from the board.
+    pipeline.solve.model = rc.camera.dist.model;
     pipeline.solve.threads = 2;
     pipeline.threads = defaultThreadCount();
     calib::ImageSet images;
@@ -447,24 +451,33 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
     h << "<h2>Camera calibration (intrinsics)</h2><p>Each camera filmed its own board take "
          "(calib_takes/&lt;camera&gt;, intrinsics preset: a chessboard moved and tilted in front of it), "
          "calibrated by the chain <code>previz calib intrinsics</code> runs (calib/pipeline.h: detect, reject soft "
-         "views, select, solve fx fy cx cy k1 k2 p1 p2 k3 with skew held, uncertainty, cross-validation). "
+         "views, select, solve fx fy cx cy and the lens's terms with skew held: k1 k2 p1 p2 k3 for a Brown-Conrady "
+         "lens, k1 k2 k3 k4 for a fisheye (Kannala-Brandt), uncertainty, cross-validation). "
          "Value &plusmn; 1&sigma; (error against the take's truth/rig.json); views: used / rendered, and the "
          "views left out with why.</p>\n<table><tr><th style=\"text-align:left\">camera</th>"
-         "<th>views</th><th>RMS px</th>";
-    const int shown_params[] = {0, 1, 2, 3, 5, 6, 7, 8, 9};
+         "<th>lens</th><th>views</th><th>RMS px</th>";
+    const int shown_params[] = {0, 1, 2, 3, 5, 6, 7, 8, 9, 10};
     for (int k : shown_params) h << "<th>" << calib::kIntrinsicNames[k] << "</th>";
     h << "</tr>\n";
     for (const CameraCalib& c : cameras) {
       const Camera& e = c.result.camera;
       const Camera& t = c.truth;
-      const double est[] = {e.fx, e.fy, e.cx, e.cy, e.skew, e.dist.k1, e.dist.k2, e.dist.p1, e.dist.p2, e.dist.k3};
-      const double tru[] = {t.fx, t.fy, t.cx, t.cy, t.skew, t.dist.k1, t.dist.k2, t.dist.p1, t.dist.p2, t.dist.k3};
+      const double est[] = {e.fx,      e.fy,      e.cx,      e.cy,      e.skew,   e.dist.k1,
+                            e.dist.k2, e.dist.p1, e.dist.p2, e.dist.k3, e.dist.k4};
+      const double tru[] = {t.fx,      t.fy,      t.cx,      t.cy,      t.skew,   t.dist.k1,
+                            t.dist.k2, t.dist.p1, t.dist.p2, t.dist.k3, t.dist.k4};
+      const bool fisheye = e.dist.model == LensModel::kKannalaBrandt;
       h << "<tr><td style=\"text-align:left\"><a href=\"calib/" << c.camera << ".report.json\">" << c.camera
-        << "</a></td><td>" << c.result.views_used << "/" << c.views;
+        << "</a></td><td>" << toString(e.dist.model) << "</td><td>" << c.result.views_used << "/" << c.views;
       for (const std::string& why : c.not_used) h << "<br><small>" << htmlEscape(why) << "</small>";
       if (!c.selection.empty()) h << "<br><small>" << htmlEscape(c.selection) << "</small>";
       h << "</td><td>" << num(c.result.rms_px, 3) << "</td>";
       for (int k : shown_params) {
+        // A term the lens model does not have: p1 p2 of a fisheye, k4 of a (plain) Brown lens.
+        if (fisheye ? (k == 7 || k == 8) : (k == 10 && !e.dist.isRational())) {
+          h << "<td>&ndash;</td>";
+          continue;
+        }
         const int d = k < 4 ? 2 : 5;
         h << "<td>" << num(est[k], d) << " &plusmn; " << num(c.result.sigma[k], d) << "<br><small>("
           << (est[k] - tru[k] >= 0 ? "+" : "") << num(est[k] - tru[k], d) << ")</small></td>";
@@ -548,6 +561,9 @@ Runner addDemoCommand(CLI::App& app) {
   cmd->add_option("--frames", a->frames, "Frames to render")->capture_default_str();
   cmd->add_option("--cams", a->cams, "Witness cameras")->capture_default_str();
   cmd->add_option("--size", a->size, "Witness size WxH (default 1280x720; main scales with it)");
+  cmd->add_option("--fisheye-witnesses", a->fisheye_witnesses,
+                  "The first N witnesses get a fisheye lens (Kannala-Brandt, ~160 degrees diagonal), calibrated as one")
+      ->capture_default_str();
   cmd->add_option("--seed", a->seed, "Random seed")->capture_default_str();
   cmd->add_option("--views", a->views, "Intrinsics board views rendered per camera")->capture_default_str();
   cmd->add_option("--select", a->select,
@@ -564,6 +580,7 @@ Runner addDemoCommand(CLI::App& app) {
     o.preset = synth::Preset::kStudio;
     o.frames = a->frames;
     o.witness_cameras = a->cams;
+    o.fisheye_witnesses = a->fisheye_witnesses;
     o.seed = a->seed;
     o.noise_sigma = 1.5;
     // The studio's choreography (walk behind the pillar, arms up, turn, walk in front) lasts
@@ -640,6 +657,7 @@ Runner addDemoCommand(CLI::App& app) {
       nlohmann::json intrinsics = nlohmann::json::array();
       for (const CameraCalib& c : cameras) {
         intrinsics.push_back({{"camera", c.camera},
+                              {"model", toString(c.result.camera.dist.model)},
                               {"views_used", c.result.views_used},
                               {"views_rendered", c.views},
                               {"views_with_board", c.found},

@@ -78,15 +78,34 @@ links_ok() {
   done
 }
 links_ok "$tmp/demo" && ok "demo --no-calibrate report links exist" || fail "demo --no-calibrate report links"
-# The calibrating path at the smallest setting found to work (the rig take's AprilGrid needs
-# ~960 px wide witnesses to decode, and 8 witnesses to chain every camera to the others): ~100 s.
-if "$bin" demo --out "$tmp/demo_cal" --frames 1 --cams 8 --size 960x540 --views 4 --rig-frames 24 --quiet >/dev/null 2>&1 \
+# The calibrating path at the smallest setting found to work, with two fisheye witnesses beside
+# six Brown-Conrady ones and the main camera (each calibrated with its own lens model). The rig
+# take's AprilGrid needs ~960 px wide Brown witnesses to decode, 1280 px fisheye ones (they see
+# the tags at half the size: at 960 x 540 the demo stops, naming them), and 8 witnesses to chain
+# every camera to the others: ~50 s. 4 board views and 24 rig frames: the figures are a smoke
+# check here (fx within 3 px, every camera within 20 mm); the calib and multicam tests hold
+# the precise bounds.
+if "$bin" demo --out "$tmp/demo_cal" --frames 1 --cams 8 --size 1280x720 --views 4 --rig-frames 24 \
+     --fisheye-witnesses 2 --quiet --json >"$tmp/demo_cal.json" 2>"$tmp/demo_cal.err" \
    && [ -s "$tmp/demo_cal/rig.json" ] && [ -s "$tmp/demo_cal/rig.png" ] && [ -s "$tmp/demo_cal/calib/main.residuals.png" ] \
    && [ -s "$tmp/demo_cal/calib/witness08.report.json" ] && [ -s "$tmp/demo_cal/tracked_main.jsonl" ] \
    && [ -s "$tmp/demo_cal/run/composite/000000.png" ] && [ -s "$tmp/demo_cal/run_true/composite/000000.png" ] \
-   && grep -q "Rig calibration" "$tmp/demo_cal/report.html" && links_ok "$tmp/demo_cal"; then
-  ok "demo calibrates the cameras and the rig, runs the take with it, report links exist"
-else fail "demo (calibrating)"; fi
+   && grep -q "Rig calibration" "$tmp/demo_cal/report.html" && grep -q "kannala-brandt" "$tmp/demo_cal/report.html" \
+   && links_ok "$tmp/demo_cal" && python3 - "$tmp/demo_cal.json" "$tmp/demo_cal/rig.json" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+models = {c["camera"]: c["model"] for c in s["intrinsics"]}
+assert models == {**{f"witness0{i}": "kannala-brandt" for i in (1, 2)},
+                  **{f"witness0{i}": "brown-conrady" for i in range(3, 9)}, "main": "brown-conrady"}, models
+assert all(abs(c["fx_error_px"]) <= 3 for c in s["intrinsics"]), s["intrinsics"]
+assert all(c["position_error_m"] <= 0.02 for c in s["rig"]["cameras"]), s["rig"]["cameras"]
+rig = {c["name"]: c for c in json.load(open(sys.argv[2]))["cameras"]}
+assert rig["witness01"]["model"] == "kannala-brandt" and "k4" in rig["witness01"]["distortion"], rig["witness01"]
+assert rig["witness03"].get("model", "brown-conrady").startswith("brown-conrady") and "k4" not in rig["witness03"]["distortion"], rig["witness03"]
+PY
+then
+  ok "demo calibrates fisheye and Brown cameras and the rig, runs the take with it, report links exist"
+else fail "demo (calibrating): $(tail -3 "$tmp/demo_cal.err")"; fi
 rm -rf "$tmp/demo_cal"
 expect_fail "demo --views 2 names the flag" "--views" "$bin" demo --out "$tmp/demo_bad" --frames 2 --cams 3 --size 160x90 --views 2 --quiet
 

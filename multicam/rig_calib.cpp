@@ -238,12 +238,14 @@ void requireViews(const RigObservations& obs, const ViewsByCamera& views, const 
   bool floor_only = obs.has_floor;
   for (const CameraDetections& d : obs.cameras)
     for (const auto& [frame, points] : d.frames) floor_only = floor_only && obs.isFloorFrame(frame);
-  const std::string what = floor_only ? " does not see the floor board (every frame of the take is a floor frame; "
-                                        "it needs >= " + std::to_string(min_points) +
+  const bool one = none.size() == 1;
+  const std::string what = floor_only ? std::string(one ? " does not" : " do not") +
+                                            " see the floor board (every frame of the take is a floor frame; "
+                                            "it needs >= " + std::to_string(min_points) +
                                             " board points that one pose explains): move the board or the camera"
-                                      : " has no usable board view (a frame with >= " + std::to_string(min_points) +
-                                            " board points that one pose explains)";
-  failCamera("rig calibrate: camera " + joinNames(none) + what, none.front());
+                                      : std::string(one ? " has" : " have") + " no usable board view (a frame with >= " +
+                                            std::to_string(min_points) + " board points that one pose explains)";
+  failCamera(std::string("rig calibrate: camera") + (one ? " " : "s ") + joinNames(none) + what, none.front());
 }
 
 // Camera poses in the reference camera's frame (T_ref_cam) from the camera graph: the cameras

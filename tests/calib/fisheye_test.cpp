@@ -127,7 +127,9 @@ TEST(Fisheye, CrossValidationComparesWhereTheBoardWasSeen) {
       inside += cv.grid.inside(r, c);
       const bool has = std::isfinite(cv.diff_px.at<double>(r, c));
       compared += has;
-      if (!cv.grid.inside(r, c)) EXPECT_FALSE(has) << r << "," << c;
+      if (!cv.grid.inside(r, c)) {
+        EXPECT_FALSE(has) << r << "," << c;
+      }
     }
   EXPECT_EQ(compared, inside);
   EXPECT_LT(inside, cv.grid.rows * cv.grid.cols);

@@ -35,7 +35,8 @@ void checkJsonLines(const fs::path& p) {
     ++n;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     try {
-      (void)nlohmann::json::parse(line);
+      const nlohmann::json parsed = nlohmann::json::parse(line);  // throws on a bad line
+      (void)parsed;
     } catch (const std::exception& e) {
       throw Error(std::string("line ") + std::to_string(n) + ": " + e.what(), fileContext(p));
     }
@@ -109,7 +110,8 @@ int main(int argc, char** argv) {
         } else if (ext == ".exr") {
           (void)readExr(p);
         } else if (ext == ".json") {
-          (void)nlohmann::json::parse(readTextFile(p));
+          const nlohmann::json parsed = nlohmann::json::parse(readTextFile(p));  // throws on bad JSON
+          (void)parsed;
         } else if (ext == ".jsonl") {
           checkJsonLines(p);
         } else if (ext == ".ply") {

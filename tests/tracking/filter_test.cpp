@@ -223,7 +223,9 @@ TEST(TrackingFilter, TurnOfTenDegreesPerFrameFollowedWithinThePerFrameSigma) {
       EXPECT_LE(after.max_rotation, after.measured_max_rotation);
       EXPECT_LE(after.max_position, after.measured_max_position);
       // The problem, reproduced: before, the origin off the axis trailed by more than sigma.
-      if (m.name.find("10 cm off") != std::string::npos) EXPECT_GT(before.lag_position, 1.0);
+      if (m.name.find("10 cm off") != std::string::npos) {
+        EXPECT_GT(before.lag_position, 1.0);
+      }
     }
   }
 }

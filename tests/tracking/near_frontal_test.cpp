@@ -250,7 +250,9 @@ TEST(NearFrontalTags, RefinedCornersNeverWorseThanTheDetectorsWhateverTheCameras
         const double se = std::sqrt(std::max(m2 - m * m, 0.0) / (kSeeds - 1));
         EXPECT_LE(m, 2 * se) << (k ? "normal" : "position") << ", " << name(resp) << " at " << dist << " m";
       }
-      if (resp != Response::kLinear) EXPECT_GT(mean[0][0], 0.3) << "the detector's own corners were expected biased";
+      if (resp != Response::kLinear) {
+        EXPECT_GT(mean[0][0], 0.3) << "the detector's own corners were expected biased";
+      }
     }
 }
 

@@ -67,10 +67,13 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
     const size_t column = line.find_first_not_of(' ');
     const char c = line[column];
     if (c == '#' || c == '%') continue;
-    if (line.compare(column, 3, "---") == 0) {
+    // Anything but a comment after a 3-character marker ("---", "...") at `column`.
+    const auto textAfterMarker = [&] {
       const size_t rest = line.find_first_not_of(" \t\r", column + 3);
-      if (rest != std::string::npos && line[rest] != '#')
-        refuse(number, "has text after the document start '---': put it on a line of its own");
+      return rest != std::string::npos && line[rest] != '#';
+    };
+    if (line.compare(column, 3, "---") == 0) {
+      if (textAfterMarker()) refuse(number, "has text after the document start '---': put it on a line of its own");
       document_start = true;
       end_line = 0;
       continue;
@@ -78,9 +81,7 @@ void checkYamlIndentation(const std::string& text, const fs::path& path) {
     if (end_line)
       refuse(number, "follows the document end '...' (line " + std::to_string(end_line) + "): not YAML");
     if (line.compare(column, 3, "...") == 0) {
-      const size_t rest = line.find_first_not_of(" \t\r", column + 3);
-      if (rest != std::string::npos && line[rest] != '#')
-        refuse(number, "has text after the document end '...': not YAML");
+      if (textAfterMarker()) refuse(number, "has text after the document end '...': not YAML");
       document_start = true;
       end_line = number;
       continue;

@@ -9,6 +9,7 @@
 // calibration figures against truth, the rig picture, composites beside the true ones, PSNR,
 // depth previews, the front/behind layer and the stage timings. Layout: docs/formats.md.
 
+#include <array>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -466,15 +467,18 @@ void writeReport(const fs::path& out, const std::vector<int>& frames, const synt
                             e.dist.k2, e.dist.p1, e.dist.p2, e.dist.k3, e.dist.k4};
       const double tru[] = {t.fx,      t.fy,      t.cx,      t.cy,      t.skew,   t.dist.k1,
                             t.dist.k2, t.dist.p1, t.dist.p2, t.dist.k3, t.dist.k4};
-      const bool fisheye = e.dist.model == LensModel::kKannalaBrandt;
+      // The terms this lens model does not have (p1 p2 of a fisheye, k4 of a plain Brown lens):
+      // the ones the solve holds at 0 whatever the locks.
+      calib::IntrinsicLocks no_locks;  // (skew aside, not shown)
+      no_locks.rational = e.dist.isRational();
+      const std::array<bool, calib::kIntrinsicCount> absent = no_locks.heldMask(e.dist.model);
       h << "<tr><td style=\"text-align:left\"><a href=\"calib/" << c.camera << ".report.json\">" << c.camera
         << "</a></td><td>" << toString(e.dist.model) << "</td><td>" << c.result.views_used << "/" << c.views;
       for (const std::string& why : c.not_used) h << "<br><small>" << htmlEscape(why) << "</small>";
       if (!c.selection.empty()) h << "<br><small>" << htmlEscape(c.selection) << "</small>";
       h << "</td><td>" << num(c.result.rms_px, 3) << "</td>";
       for (int k : shown_params) {
-        // A term the lens model does not have: p1 p2 of a fisheye, k4 of a (plain) Brown lens.
-        if (fisheye ? (k == 7 || k == 8) : (k == 10 && !e.dist.isRational())) {
+        if (absent[k]) {
           h << "<td>&ndash;</td>";
           continue;
         }

@@ -715,10 +715,20 @@ int shadowNeighbourhood(const cv::Mat& residual, const DifferenceFrame& d, int y
 // in mixed neighbours, and the despilled main plate keeps screen green on 2 % of its edge.
 constexpr float kPureReach = 0.8f;
 
-// Plain (no member initialisers): edgeAlpha's candidate arrays are filled before they are read,
-// and zeroing them on every call cost about a fifth of its time (measured).
 struct Rgb {
   float b, g, r;
+};
+
+// A window's foreground or unknown colours, one array per channel (the scoring below reads four
+// at a time), padded to a multiple of 4. Plain (no member initialisers): the arrays are filled
+// before they are read, and zeroing them on every call cost about a fifth of edgeAlpha's time
+// (measured).
+constexpr int kMaxCandidates = 49;  // (2 * 3 + 1)^2
+struct Candidates {
+  alignas(16) float b[kMaxCandidates + 3];
+  alignas(16) float g[kMaxCandidates + 3];
+  alignas(16) float r[kMaxCandidates + 3];
+  int n;
 };
 
 // Two-colour alpha of pixel (x, y) from its window: B = local background, F = the mean of the
@@ -731,10 +741,6 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   const auto& lut = srgb8ToLinear();
   const int x0 = std::max(0, x - radius), x1 = std::min(bgr8.cols - 1, x + radius);
   const int y0 = std::max(0, y - radius), y1 = std::min(bgr8.rows - 1, y + radius);
-  auto colour = [&](const cv::Mat& img, int xx, int yy) {
-    const std::uint8_t* p = img.ptr<std::uint8_t>(yy) + 3 * xx;
-    return Rgb{lut[p[0]], lut[p[1]], lut[p[2]]};
-  };
   // Interior first, on the classes alone: no background in the window but the pixel itself
   // (a background pixel being refined is not its own B). Most refined pixels of a noisy plate
   // are unknown pixels inside a dark costume part; reading their window's colours is the cost.
@@ -744,13 +750,16 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     for (int xx = x0; xx <= x1; ++xx) any_bg |= c[xx] <= kGarbage && (xx != x || yy != y);
   }
   if (!any_bg) return -1.0f;
-  constexpr int kMaxCandidates = 49;  // (2 * 3 + 1)^2
   // The window's sums per class, accumulated in scan order in locals (kept in registers: a sum
   // picked by reference per pixel went through memory, measured ~15 % of the keyer's time).
+  // Without branches: the classes along a window row change at the edge the pixel is on, which
+  // the branch predictor cannot learn. A sum adds 0 for a pixel of another class (x + 0 = x, so
+  // the sums are those of the pixels of the class, in the same order), and every colour is
+  // written to both candidate arrays, the count of the one it belongs to moving on.
   float ssb = 0, ssg = 0, ssr = 0, sgb = 0, sgg = 0, sgr = 0, spb = 0, spg = 0, spr = 0;
   int n_screen = 0, n_garbage = 0;
-  std::array<Rgb, kMaxCandidates> fg, unknown;
-  int n_fg = 0, n_unknown = 0;
+  Candidates fg, unknown;
+  fg.n = unknown.n = 0;
   for (int yy = y0; yy <= y1; ++yy) {
     const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
     const std::uint8_t* row = bgr8.ptr<std::uint8_t>(yy);
@@ -759,29 +768,30 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
       const std::uint8_t k = c[xx];
       const std::uint8_t* p = row + 3 * xx;
       const float b = lut[p[0]], g = lut[p[1]], r = lut[p[2]];
-      if (k == kScreen || k == kGarbage) {
-        if (xx == x && yy == y) continue;  // a background pixel being refined is not its own B
-        if (k == kScreen) {
-          ssb += b, ssg += g, ssr += r;
-          ++n_screen;
-        } else {
-          sgb += b, sgg += g, sgr += r;
-          ++n_garbage;
-        }
-        if (use_plate) {
-          const std::uint8_t* q = plate_row + 3 * xx;
-          spb += lut[q[0]], spg += lut[q[1]], spr += lut[q[2]];
-        }
-      } else if (k == kUnknown) {
-        unknown[n_unknown++] = Rgb{b, g, r};
-      } else {
-        fg[n_fg++] = Rgb{b, g, r};
+      const bool self = xx == x && yy == y;  // a background pixel being refined is not its own B
+      const bool screen = k == kScreen && !self, garbage = k == kGarbage && !self;
+      ssb += screen ? b : 0.0f, ssg += screen ? g : 0.0f, ssr += screen ? r : 0.0f;
+      sgb += garbage ? b : 0.0f, sgg += garbage ? g : 0.0f, sgr += garbage ? r : 0.0f;
+      n_screen += screen;
+      n_garbage += garbage;
+      if (use_plate) {
+        const std::uint8_t* q = plate_row + 3 * xx;
+        const bool bg = screen || garbage;
+        spb += bg ? lut[q[0]] : 0.0f, spg += bg ? lut[q[1]] : 0.0f, spr += bg ? lut[q[2]] : 0.0f;
       }
+      unknown.b[unknown.n] = b, unknown.g[unknown.n] = g, unknown.r[unknown.n] = r;
+      unknown.n += k == kUnknown;
+      fg.b[fg.n] = b, fg.g[fg.n] = g, fg.r[fg.n] = r;
+      fg.n += k > kUnknown;
     }
   }
   const Rgb sum_screen{ssb, ssg, ssr}, sum_garbage{sgb, sgg, sgr}, sum_plate{spb, spg, spr};
   const int n_bg = n_screen + n_garbage;
   if (n_bg == 0) return -1.0f;
+  auto colour = [&](const cv::Mat& img, int xx, int yy) {
+    const std::uint8_t* p = img.ptr<std::uint8_t>(yy) + 3 * xx;
+    return Rgb{lut[p[0]], lut[p[1]], lut[p[2]]};
+  };
   const Rgb c = colour(bgr8, x, y);
   Rgb bg{};
   if (use_plate) {
@@ -809,12 +819,10 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   // Candidates for F: the clear foreground, else the unknown (dark foreground in front of dark
   // surroundings differs from the plate or the surroundings' colour by little; a thin structure
   // has no pure pixel).
-  const Rgb* candidates = fg.data();
-  int n_candidates = n_fg;
+  Candidates& cand = fg.n > 0 ? fg : unknown;
+  const int n_candidates = cand.n;
   float min_reach2 = 0.0f;
-  if (n_fg == 0) {
-    candidates = unknown.data();
-    n_candidates = n_unknown;
+  if (fg.n == 0) {
     // An unknown neighbour counts only if it differs from B by more than noise does: 0.02 in
     // linear light (about 10 sigma of 2-level sensor noise on the dark surroundings) or 30 % of
     // B's own magnitude.
@@ -822,27 +830,40 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     min_reach2 = floor * floor;
   }
   if (n_candidates == 0) return -2.0f;
+  for (int i = n_candidates; i % 4 != 0; ++i) {  // padding: read by the last step, never used
+    cand.b[i] = cand.g[i] = cand.r[i] = 0.0f;
+  }
   const float cb = c.b - bg.b, cg = c.g - bg.g, cr = c.r - bg.r;
   const float cc = cb * cb + cg * cg + cr * cr;
-  // Score every candidate: squared sine of the angle between C - B and F - B (0 = on the mixing
-  // line).
-  std::array<float, kMaxCandidates> sine2, reach, t;
-  float best_sine2 = 4.0f;
-  for (int i = 0; i < n_candidates; ++i) {
-    const Rgb& f = candidates[i];
-    const float db = f.b - bg.b, dg = f.g - bg.g, dr = f.r - bg.r;
-    const float dd = db * db + dg * dg + dr * dr;
-    reach[i] = dd;
-    if (dd < 1e-10f || dd < min_reach2) {
-      sine2[i] = 4.0f;
-      t[i] = 1.0f;
-      continue;
+  // Score every candidate, four at a time: squared sine of the angle between C - B and F - B
+  // (0 = on the mixing line; 4 = not a candidate: too near B, or a padding lane). Each lane
+  // computes what one scalar candidate would, with the same operations in the same order.
+  alignas(16) std::array<float, kMaxCandidates + 3> sine2, reach;
+  cv::v_float32x4 best = cv::v_setall_f32(4.0f);
+  {
+    const cv::v_float32x4 vbb = cv::v_setall_f32(bg.b), vbg = cv::v_setall_f32(bg.g), vbr = cv::v_setall_f32(bg.r);
+    const cv::v_float32x4 vcb = cv::v_setall_f32(cb), vcg = cv::v_setall_f32(cg), vcr = cv::v_setall_f32(cr);
+    const cv::v_float32x4 vcc = cv::v_setall_f32(cc), tiny = cv::v_setall_f32(1e-10f);
+    const cv::v_float32x4 vmin_reach2 = cv::v_setall_f32(min_reach2), vone = cv::v_setall_f32(1.0f);
+    const cv::v_float32x4 vfour = cv::v_setall_f32(4.0f), vzero = cv::v_setzero_f32();
+    const bool colour_off_b = cc > 1e-12f;  // else C is B: every candidate is on the line
+    const cv::v_int32x4 lane(0, 1, 2, 3);
+    for (int i = 0; i < n_candidates; i += 4) {
+      const cv::v_float32x4 db = cv::v_load(cand.b + i) - vbb, dg = cv::v_load(cand.g + i) - vbg,
+                            dr = cv::v_load(cand.r + i) - vbr;
+      const cv::v_float32x4 dd = db * db + dg * dg + dr * dr;
+      const cv::v_float32x4 dot = vcb * db + vcg * dg + vcr * dr;
+      const cv::v_float32x4 in_range =
+          cv::v_reinterpret_as_f32(lane + cv::v_setall_s32(i) < cv::v_setall_s32(n_candidates));
+      const cv::v_float32x4 ok = in_range & (dd >= tiny) & (dd >= vmin_reach2);
+      const cv::v_float32x4 s = colour_off_b ? cv::v_max(vzero, vone - dot * dot / (dd * vcc)) : vzero;
+      const cv::v_float32x4 sn = cv::v_select(ok, s, vfour);
+      cv::v_store_aligned(sine2.data() + i, sn);
+      cv::v_store_aligned(reach.data() + i, dd);
+      best = cv::v_min(best, sn);
     }
-    const float dot = cb * db + cg * dg + cr * dr;
-    t[i] = dot / dd;
-    sine2[i] = cc > 1e-12f ? std::max(0.0f, 1.0f - dot * dot / (dd * cc)) : 0.0f;
-    best_sine2 = std::min(best_sine2, sine2[i]);
   }
+  const float best_sine2 = cv::v_reduce_min(best);
   // Among the candidates nearly as well aligned as the best (sine within 0.1), the farthest
   // from B: a mixed neighbour lies on the same line but nearer, and would overstate alpha.
   const float tolerance = std::sqrt(best_sine2) + 0.1f;
@@ -860,12 +881,17 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   int n_pure = 0;
   for (int i = 0; i < n_candidates; ++i) {
     if (sine2[i] > tolerance2 || reach[i] < min_reach) continue;
-    pure_b += candidates[i].b, pure_g += candidates[i].g, pure_r += candidates[i].r;
+    pure_b += cand.b[i], pure_g += cand.g[i], pure_r += cand.r[i];
     ++n_pure;
   }
   const float db = pure_b / n_pure - bg.b, dg = pure_g / n_pure - bg.g, dr = pure_r / n_pure - bg.r;
   const float dd = db * db + dg * dg + dr * dr;
-  if (dd < 1e-10f) return std::clamp(t[pick], 0.0f, 1.0f);
+  if (dd < 1e-10f) {
+    // The pick's own projection (a picked candidate is never one too near B: its sine2 is < 4).
+    const float pb = cand.b[pick] - bg.b, pg = cand.g[pick] - bg.g, pr = cand.r[pick] - bg.r;
+    const float pdd = pb * pb + pg * pg + pr * pr;
+    return std::clamp((cb * pb + cg * pg + cr * pr) / pdd, 0.0f, 1.0f);
+  }
   return std::clamp((cb * db + cg * dg + cr * dr) / dd, 0.0f, 1.0f);
 }
 

@@ -212,24 +212,6 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
   // The 2 x 2 block of a tap read as four 4-float vectors, unless that would read past the CG's
   // last float (a block whose bottom-right pixel is the CG's last pixel).
   const long long vector_taps_below = static_cast<long long>(CW) * CH - 1 - dx1 - dy1;
-  // CG through the lens at a tap: bilinear colour in lanes R, G, B, the CG's gain applied.
-  auto cgColour = [&](const Tap& t) -> Float4 {
-    if (t.index < 0) return Float4{outside[2], outside[1], outside[0], 0.f};
-    const float ax = t.ax, ay = t.ay;
-    const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
-    const float* p01 = p00 + 3 * dx1;
-    const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
-    const float* p11 = p10 + 3 * dx1;
-    const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
-    if (t.index < vector_taps_below) {
-      // The same products and sums, in the same order, as the scalar lines below.
-      return gain * (w00 * load4(p00) + w01 * load4(p01) + w10 * load4(p10) + w11 * load4(p11));
-    }
-    return Float4{gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]),
-                  gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]),
-                  gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]), 0.f};
-  };
-
   long long actor_px = 0, actor_front = 0, cg_front = 0, filled = 0, fallback = 0;
 #pragma omp parallel for schedule(static, 16) num_threads(resolveThreads(options_.threads)) \
     reduction(+ : actor_px, actor_front, cg_front, filled, fallback)
@@ -239,15 +221,42 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
     const float* al = in.alpha.ptr<float>(v);
     const float* za_row = in.actor_depth.ptr<float>(v);
     std::uint8_t* o = r.bgr.ptr<std::uint8_t>(v);
+    // What the pixels read, copied into the row's own variables: a byte store may alias any
+    // memory, so a value read through the parallel region's shared data (or a lambda's
+    // reference) was reloaded from memory after every pixel's stores.
+    const bool debug = debug_layers;
+    const std::uint8_t* const enc_row = enc;
+    const float* const cg_z_row = cg_z;
+    const float band_row = band;
+    const int dx1_row = dx1, dy1_row = dy1;
+    const Float4 outside_rgb{outside[2], outside[1], outside[0], 0.f};
+    // CG through the lens at a tap: bilinear colour in lanes R, G, B, the CG's gain applied.
+    auto cgColour = [=](const Tap& t) -> Float4 {
+      if (t.index < 0) return outside_rgb;
+      const float ax = t.ax, ay = t.ay;
+      const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
+      const float* p01 = p00 + 3 * dx1;
+      const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
+      const float* p11 = p10 + 3 * dx1;
+      const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+      if (t.index < vector_taps_below) {
+        // The same products and sums, in the same order, as the scalar lines below.
+        return gain * (w00 * load4(p00) + w01 * load4(p01) + w10 * load4(p10) + w11 * load4(p11));
+      }
+      return Float4{gain * (w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0]),
+                    gain * (w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1]),
+                    gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]), 0.f};
+    };
+
     for (int u = 0; u < W; ++u) {
       const Tap t = tap_row[u];
-      if (!(al[u] > 0) && !debug_layers) {
-        encode3(enc, cgColour(t), o + 3 * u);  // no actor (most of the frame): the CG alone
+      if (!(al[u] > 0) && !debug) {
+        encode3(enc_row, cgColour(t), o + 3 * u);  // no actor (most of the frame): the CG alone
         continue;
       }
       // CG depth through the lens: nearest (a blend of depths across the pillar's edge would be
       // a depth that exists nowhere).
-      const float zc = t.index < 0 ? kInf : cg_z[t.index + (t.ax >= 0.5f ? dx1 : 0) + (t.ay >= 0.5f ? dy1 : 0)];
+      const float zc = t.index < 0 ? kInf : cg_z_row[t.index + (t.ax >= 0.5f ? dx1_row : 0) + (t.ay >= 0.5f ? dy1_row : 0)];
       const float alpha = std::clamp(al[u], 0.f, 1.f);
       float za = za_row[u];
       unsigned char code = kFrontNone;
@@ -286,8 +295,8 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
           ++fallback;
         } else if (!std::isfinite(zc)) {
           w = 1.f;
-        } else if (band > 0) {
-          w = smoothstep01((zc - za) / band + 0.5f);
+        } else if (band_row > 0) {
+          w = smoothstep01((zc - za) / band_row + 0.5f);
         } else {
           w = za < zc ? 1.f : 0.f;
         }
@@ -298,7 +307,7 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
         a = alpha * w;
       }
       const std::uint8_t* fp = f + 3 * u;
-      if (a >= 1.f && !debug_layers) {
+      if (a >= 1.f && !debug) {
         // The plate as shot, byte for byte (decode + encode is the identity on 8-bit codes).
         o[3 * u + 0] = fp[0];
         o[3 * u + 1] = fp[1];
@@ -310,8 +319,8 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
       const float ob = a * dec[fp[0]] + (1 - a) * cb;
       const float og = a * dec[fp[1]] + (1 - a) * cgc;
       const float orr = a * dec[fp[2]] + (1 - a) * cr;
-      encode3(enc, Float4{orr, og, ob, 0.f}, o + 3 * u);
-      if (debug_layers) {
+      encode3(enc_row, Float4{orr, og, ob, 0.f}, o + 3 * u);
+      if (debug) {
         r.layer_alpha.ptr<float>(v)[u] = a;
         r.layer_actor_depth.ptr<float>(v)[u] = alpha > 0 ? za : kInf;
         r.layer_cg_depth.ptr<float>(v)[u] = zc;

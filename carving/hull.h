@@ -107,6 +107,10 @@ class Carver {
   // visual hull of the masks to well under a millimetre. CV_32FC1, +inf where the ray misses.
   // The first call per lens builds its per-pixel ray table (~0.2 s at 1920x1080), then reused.
   cv::Mat depth(const VisualHull& hull, const RigCamera& camera, const cv::Mat& silhouette) const;
+  // The same into 'out', reusing its buffer when it has the camera's size and type (the live loop
+  // keeps one: no 8 MB allocation and its page faults per 1920x1080 frame). Images sharing that
+  // buffer see it overwritten.
+  void depth(const VisualHull& hull, const RigCamera& camera, const cv::Mat& silhouette, cv::Mat& out) const;
 
   // Surface mesh of the hull: surface nets over the surface cells (one vertex per cell the
   // surface crosses, at the mean of its edges' crossings, each found by bisection with the

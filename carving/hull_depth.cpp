@@ -382,6 +382,13 @@ void traceRays(const HullData& h, const Camera& cam, const RayTable& table,
 
 cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
                       const cv::Mat& silhouette) const {
+  cv::Mat out;
+  depth(hull, camera, silhouette, out);
+  return out;
+}
+
+void Carver::depth(const VisualHull& hull, const RigCamera& camera, const cv::Mat& silhouette,
+                   cv::Mat& out) const {
   const Camera& cam = camera.camera;
   cam.validate();
   if (!silhouette.empty()) {
@@ -394,10 +401,10 @@ cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
                       std::to_string(cam.width) + "x" + std::to_string(cam.height),
                   ErrorContext{"", cam.name, std::nullopt, "silhouette"});
   }
-  cv::Mat out(cam.height, cam.width, CV_32FC1);
+  out.create(cam.height, cam.width, CV_32FC1);
   if (!hull.data || !hull.data->hasCells()) {
     out.setTo(cv::Scalar(std::numeric_limits<float>::infinity()));
-    return out;
+    return;
   }
   const int threads = resolveThreads(impl_->options.threads);
   const std::shared_ptr<const RayTable> table = impl_->rayTable(cam, threads);
@@ -424,7 +431,6 @@ cv::Mat Carver::depth(const VisualHull& hull, const RigCamera& camera,
   else
     traceRays<0>(h, cam, *table, R, centre, qo.data(), silhouette, bounded ? &bound : nullptr,
                  threads, out);
-  return out;
 }
 
 }  // namespace previz::carving

@@ -110,6 +110,7 @@ struct FrameLoop::Impl {
   carving::KeyResult main_key;        // likewise (the main camera's 2 Mpx: no allocation per frame)
   std::vector<carving::KeyResult> witness_keys;
   cv::Mat foreground;
+  cv::Mat main_depth;                 // likewise
   std::optional<int> last_frame;      // the last frame keyed (region keying needs consecutive ones)
 
   int threads() const { return resolveThreads(options.threads); }
@@ -191,7 +192,10 @@ struct FrameLoop::Impl {
     s.hull = carver->carve(sil);
   }
 
-  void depth(FrameState& s) { s.main_depth = carver->depth(s.hull, s.main, s.main_key.silhouette); }
+  void depth(FrameState& s) {
+    carver->depth(s.hull, s.main, s.main_key.silhouette, main_depth);
+    s.main_depth = main_depth;
+  }
 
   void compose(FrameState& s) {
     compositor->setLens(s.main.camera);

@@ -102,7 +102,8 @@ struct FrameState {
   carving::KeyResult main_key;
   cv::Mat foreground;                        // despilled main plate
   carving::VisualHull hull;
-  cv::Mat main_depth;                        // CV_32FC1, +inf outside the hull / key
+  // CV_32FC1, +inf outside the hull / key: the loop's buffer, shared like 'composite'.
+  cv::Mat main_depth;
   // The loop's composite buffers, shared: overwritten by the next run() (clone to keep).
   composite::CompositeResult composite;
   std::optional<tracking::TrackFrame> props;  // the props stage's frame (docs/formats.md, "Tracking")

@@ -94,6 +94,7 @@ assert [s["budget_ms"] for s in j["stages"] if s["stage"] == "props"] == [3], j
 assert 0 <= j["props_full_frame_fraction"] <= 1, j
 assert j["noise_sigma"] == json.load(open(sys.argv[2]))["options"]["noise_sigma"], j
 assert j["latency_ms"] >= j["ms"] * 0.999, j
+assert 0 < j["ms_mean"] <= j["ms_max"] and j["ms"] <= j["ms_p95"] <= j["ms_max"], j
 # The frames' quality against the take's truth stays where it is (measured on this take: witness
 # IoU min 0.963, median 0.985; depth within 0.05 mm of the exact hull at p95, 2 of 3778 pixels
 # with depth in one only; composite PSNR over the actor 30.3 dB).

@@ -235,9 +235,9 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
       if (t.index < 0) return outside_rgb;
       const float ax = t.ax, ay = t.ay;
       const float* p00 = cg_rgb + 3 * static_cast<size_t>(t.index);
-      const float* p01 = p00 + 3 * dx1;
-      const float* p10 = p00 + 3 * static_cast<size_t>(dy1);
-      const float* p11 = p10 + 3 * dx1;
+      const float* p01 = p00 + 3 * dx1_row;
+      const float* p10 = p00 + 3 * static_cast<size_t>(dy1_row);
+      const float* p11 = p10 + 3 * dx1_row;
       const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
       if (t.index < vector_taps_below) {
         // The same products and sums, in the same order, as the scalar lines below.

@@ -321,13 +321,60 @@ int garbageLikeness(const GarbageModel& gm, float r, float g, float b) {
   return likeness;
 }
 
-// Sets every pixel of m outside r (within m) to 0.
-void zeroOutside(cv::Mat& m, const cv::Rect& r) {
-  const int W = m.cols, H = m.rows;
-  if (r.y > 0) m.rowRange(0, r.y).setTo(0);
-  if (r.br().y < H) m.rowRange(r.br().y, H).setTo(0);
-  if (r.x > 0) m(cv::Rect(0, r.y, r.x, r.height)).setTo(0);
-  if (r.br().x < W) m(cv::Rect(r.br().x, r.y, W - r.br().x, r.height)).setTo(0);
+// Calls gap(y, x0, x1) for every run [x0, x1) of row y (within W) that no rect of 'rects'
+// (disjoint) covers ('spans' is scratch).
+template <class Gap>
+void rowGaps(int y, int W, const std::vector<cv::Rect>& rects, std::vector<std::pair<int, int>>& spans, Gap&& gap) {
+  spans.clear();
+  for (const cv::Rect& r : rects)
+    if (y >= r.y && y < r.br().y) spans.emplace_back(r.x, r.br().x);
+  std::sort(spans.begin(), spans.end());
+  int x = 0;
+  for (const auto& [x0, x1] : spans) {
+    if (x0 > x) gap(y, x, x0);
+    x = std::max(x, x1);
+  }
+  if (x < W) gap(y, x, W);
+}
+// The same for every row of the W x H image.
+template <class Gap>
+void forEachGap(int W, int H, const std::vector<cv::Rect>& rects, Gap&& gap) {
+  std::vector<std::pair<int, int>> spans;
+  for (int y = 0; y < H; ++y) rowGaps(y, W, rects, spans, gap);
+}
+
+// Sets every pixel of m outside the rects (disjoint, within m) to 0.
+void zeroOutside(cv::Mat& m, const std::vector<cv::Rect>& rects) {
+  const size_t px = m.elemSize();
+  forEachGap(m.cols, m.rows, rects, [&](int y, int x0, int x1) {
+    std::memset(m.ptr<std::uint8_t>(y) + px * x0, 0, px * static_cast<size_t>(x1 - x0));
+  });
+}
+
+// Boxes grown by 'margin', clipped to 'whole', and merged until no two overlap (a merged box
+// is the bounding box of the two, which may overlap a third).
+std::vector<cv::Rect> growAndMerge(const std::vector<cv::Rect>& boxes, int margin, const cv::Rect& whole) {
+  std::vector<cv::Rect> out;
+  for (const cv::Rect& b : boxes) {
+    const cv::Rect g = cv::Rect(b.x - margin, b.y - margin, b.width + 2 * margin, b.height + 2 * margin) & whole;
+    if (!g.empty()) out.push_back(g);
+  }
+  for (bool merged = true; merged;) {
+    merged = false;
+    for (size_t i = 0; i < out.size() && !merged; ++i)
+      for (size_t j = i + 1; j < out.size(); ++j)
+        if (!(out[i] & out[j]).empty()) {
+          out[i] |= out[j];
+          out.erase(out.begin() + static_cast<std::ptrdiff_t>(j));
+          merged = true;
+          break;
+        }
+  }
+  // Top to bottom, left to right: the keying order, whatever order the parts were found in.
+  std::sort(out.begin(), out.end(), [](const cv::Rect& a, const cv::Rect& b) {
+    return a.y != b.y ? a.y < b.y : a.x < b.x;
+  });
+  return out;
 }
 
 // Screen test of one row, 16 pixels per step: kScreen where the chroma and the green's range say
@@ -956,8 +1003,9 @@ int findRoot(std::vector<int>& parent, int i) {
   return i;
 }
 
-void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeyStats& stats) {
-  if (o.min_blob_px <= 1 && o.min_hole_px <= 1) return;
+void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeyStats& stats,
+                     std::vector<cv::Rect>* parts) {
+  if (o.min_blob_px <= 1 && o.min_hole_px <= 1 && parts == nullptr) return;
   const int W = sil.cols, H = sil.rows;
   std::vector<Run> runs;
   std::vector<int> row_start(H + 1, 0);
@@ -1026,6 +1074,22 @@ void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeySt
     counted[root] = 1;
     std::memset(sil.ptr<std::uint8_t>(r.y) + r.x0, value, static_cast<size_t>(r.x1 - r.x0));
     std::memset(alpha8.ptr<std::uint8_t>(r.y) + r.x0, value, static_cast<size_t>(r.x1 - r.x0));
+  }
+  if (parts == nullptr) return;
+  // The boxes of the foreground parts kept (a filled hole lies inside the part around it).
+  std::vector<int> box_of(n, -1);
+  parts->clear();
+  for (int i = 0; i < n; ++i) {
+    const Run& r = runs[i];
+    const int root = findRoot(parent, i);
+    if (!r.fg || area[root] < o.min_blob_px) continue;
+    const cv::Rect run(r.x0, r.y, r.x1 - r.x0, 1);
+    if (box_of[root] < 0) {
+      box_of[root] = static_cast<int>(parts->size());
+      parts->push_back(run);
+    } else {
+      (*parts)[static_cast<size_t>(box_of[root])] |= run;
+    }
   }
 }
 
@@ -1243,70 +1307,92 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
   if (f.difference) shadow_residual_.create(H, W, CV_8SC4);
   result.silhouette.create(H, W, CV_8UC1);
 
-  // Region keying (KeyerOptions::region_margin_px): the box around the last silhouette, unless
-  // a whole frame is due or something new shows outside it.
+  // Region keying (KeyerOptions::region_margin_px): the boxes around the last silhouette's parts,
+  // unless a whole frame is due or something new shows outside them.
   const cv::Rect whole(0, 0, W, H);
   const char* full_reason = nullptr;
   if (options_.region_margin_px <= 0) full_reason = "regions off";
-  else if (region_.empty()) full_reason = "no earlier silhouette";
-  else if (region_.br().x > W || region_.br().y > H) full_reason = "frame size changed";
+  else if (regions_.empty()) full_reason = "no earlier silhouette";
+  else if (std::any_of(regions_.begin(), regions_.end(), [&](const cv::Rect& r) { return (r & whole) != r; }))
+    full_reason = "frame size changed";
   else if (options_.region_full_every > 0 &&
            (frames_keyed_ + options_.region_full_phase) % options_.region_full_every == 0)
     full_reason = "periodic whole frame";
-  else if (foregroundOutside(f, region_)) full_reason = "foreground outside the region";
+  else if (foregroundOutside(f, regions_)) full_reason = "foreground outside the region";
+  // The silhouette's parts (their boxes), for the next frame's regions.
+  std::vector<cv::Rect>* parts = options_.region_margin_px > 0 ? &parts_ : nullptr;
+  if (parts != nullptr) parts->clear();
+  result.stats = {};
   if (full_reason == nullptr) {
-    // keyRegion writes every pixel of the region: only the rest is cleared (the alpha only
-    // when it is returned; a witness's is never read outside the region).
-    zeroOutside(result.silhouette, region_);
-    if (options_.soft_alpha) zeroOutside(alpha8_, region_);
-    keyRegion(f, region_, result);
-    if (reachesEdge(result.silhouette, region_)) full_reason = "silhouette reached the region's edge";
+    // keyRegion writes every pixel of a region: only the rest is cleared (the alpha only when
+    // it is returned; a witness's is never read outside the regions).
+    zeroOutside(result.silhouette, regions_);
+    if (options_.soft_alpha) zeroOutside(alpha8_, regions_);
+    for (const cv::Rect& r : regions_) {
+      keyRegion(f, r, result, &region_parts_);
+      for (const cv::Rect& part : region_parts_) parts->push_back(part + r.tl());
+      result.stats.keyed_px += r.area();
+      if (reachesEdge(result.silhouette, r)) {
+        full_reason = "silhouette reached the region's edge";
+        break;
+      }
+    }
   }
-  if (full_reason != nullptr) keyRegion(f, whole, result);
+  if (full_reason != nullptr) {
+    result.stats = {};
+    if (parts != nullptr) parts->clear();
+    keyRegion(f, whole, result, parts);
+    result.stats.keyed_px = W * H;
+  }
   ++frames_keyed_;
   result.stats.whole_frame = full_reason != nullptr;
   result.stats.whole_frame_reason = full_reason != nullptr ? full_reason : "";
-  // The next frame's region: this silhouette's box, grown by the margin (none when empty: the
-  // next frame is keyed whole, which also finds an actor walking in).
-  if (options_.region_margin_px > 0) {
-    // Within what was keyed: the silhouette is empty elsewhere.
-    const cv::Rect keyed = full_reason != nullptr ? whole : region_;
-    cv::Rect box = cv::boundingRect(result.silhouette(keyed));
-    if (!box.empty()) box += keyed.tl();
-    const int m = options_.region_margin_px;
-    region_ = box.empty() ? cv::Rect() : (cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & whole);
+  if (options_.soft_alpha) {
+    if (full_reason != nullptr) {
+      alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
+    } else {
+      result.alpha.create(H, W, CV_32FC1);
+      zeroOutside(result.alpha, regions_);
+      for (const cv::Rect& r : regions_) {
+        cv::Mat dst = result.alpha(r);
+        alpha8_(r).convertTo(dst, CV_32FC1, 1.0 / 255.0);
+      }
+    }
+  } else {
+    result.alpha.release();
   }
-  if (options_.soft_alpha) alpha8_.convertTo(result.alpha, CV_32FC1, 1.0 / 255.0);
-  else result.alpha.release();
+  // The next frame's regions: each part's box grown by the margin, overlapping boxes merged
+  // (none when the silhouette is empty: the next frame is keyed whole, which also finds an
+  // actor walking in).
+  if (parts != nullptr) regions_ = growAndMerge(*parts, options_.region_margin_px, whole);
 }
 
-void Keyer::resetRegion() { region_ = cv::Rect(); }
+void Keyer::resetRegion() { regions_.clear(); }
 
-bool Keyer::foregroundOutside(const Frame& f, const cv::Rect& region) {
+bool Keyer::foregroundOutside(const Frame& f, const std::vector<cv::Rect>& regions) {
   // Every kRegionProbeRows-th row classified whole (the first pass alone, no flood, so
-  // garbage-like pixels do not count): a run of clear foreground outside the region is
+  // garbage-like pixels do not count): a run of clear foreground outside the regions is
   // something new (an actor walking in, a prop put down). Smaller than the row step, or the
   // surroundings' own colour, it is found by the periodic whole frame.
   const cv::Mat& bgr8 = *f.bgr8;
   const int W = bgr8.cols, H = bgr8.rows;
   std::vector<cv::Point> seeds;
+  std::vector<std::pair<int, int>> spans;
   for (int y = kRegionProbeRows / 2; y < H; y += kRegionProbeRows) {
     if (f.difference)
       differenceRows(bgr8, screen_.plate, f.diff, y, y + 1, classes_, shadow_residual_);
     else
       classifyRows(bgr8, f.params, y, y + 1, classes_, seeds);
     const std::uint8_t* c = classes_.ptr<std::uint8_t>(y);
-    const bool in_rows = y >= region.y && y < region.br().y;
-    int run = 0;
-    for (int x = 0; x < W; ++x) {
-      if (in_rows && x == region.x) {
-        x = region.br().x - 1;
-        run = 0;
-        continue;
+    bool found = false;
+    rowGaps(y, W, regions, spans, [&](int, int x0, int x1) {
+      int run = 0;  // a run stops at a region's edge
+      for (int x = x0; x < x1 && !found; ++x) {
+        run = c[x] == kFg ? run + 1 : 0;
+        found = run >= kRegionProbeRun;
       }
-      run = c[x] == kFg ? run + 1 : 0;
-      if (run >= kRegionProbeRun) return true;
-    }
+    });
+    if (found) return true;
   }
   return false;
 }
@@ -1331,7 +1417,7 @@ bool Keyer::reachesEdge(const cv::Mat& silhouette, const cv::Rect& region) {
   return false;
 }
 
-void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result) {
+void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result, std::vector<cv::Rect>* parts) {
   // The region as images of its own (views: no copy): the frame, the screen model's per-pixel
   // images, the garbage memory and the scratch. Every pass below reads rows of these views, so
   // the region's edge is their image edge (the garbage flood starts there too: the region's edge
@@ -1395,7 +1481,6 @@ void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result) {
   // pixels and for pixels with a 4-neighbour on the other side (a background pixel beside the
   // foreground may hold a little of it: a dark costume's edge keeps the screen's chroma).
   need_rows_.create(bands, W, CV_8UC1);
-  result.stats = {};
   const int radius = options_.edge_radius_px;
   const int threshold8 = static_cast<int>(std::lround(options_.silhouette_threshold * 255.0));
   cv::Mat* memory = params.memory != nullptr ? &memory_view : nullptr;
@@ -1470,11 +1555,11 @@ void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result) {
       }
     }
   }
-  result.stats.unknown_px = unknown;
-  result.stats.lone_unknown_px = lone;
-  result.stats.garbage_px = garbage;
-  result.stats.shadow_px = shadows;
-  cleanSilhouette(silhouette, alpha8, options_, result.stats);
+  result.stats.unknown_px += unknown;
+  result.stats.lone_unknown_px += lone;
+  result.stats.garbage_px += garbage;
+  result.stats.shadow_px += shadows;
+  cleanSilhouette(silhouette, alpha8, options_, result.stats, parts);
 }
 
 cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen,

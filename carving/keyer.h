@@ -93,12 +93,14 @@ struct KeyerOptions {
   int threads = 0;  // OpenMP threads for one key() call (0 = OpenMP's default)
   // Region keying, for consecutive frames of a live loop (0 = off: every frame keyed whole). The
   // actor covers 2-5 % of a witness frame and moves a few pixels a frame, so a frame is keyed
-  // only inside the last frame's silhouette box grown by this margin (px); everywhere else is
-  // background. The frame is keyed whole instead (KeyStats::whole_frame says why) when there is
-  // no earlier silhouette, when the silhouette reaches the region's edge (it may go on past it),
-  // when every 8th row probed outside the region shows clear foreground (an actor walking in,
-  // a prop put down; 3 pixels in a row), and every region_full_every frames (what the probe
-  // cannot see: something under 8 rows tall, or of the surroundings' own colour). Call
+  // only inside the boxes of the last frame's silhouette parts (each connected part: the actor,
+  // a prop across the stage), grown by this margin (px), boxes that overlap merged; everywhere
+  // else is background. One box around actor and prop together held half as many pixels again
+  // on the live bench take. The frame is keyed whole instead (KeyStats::whole_frame says why)
+  // when there is no earlier silhouette, when the silhouette reaches a region's edge (it may go
+  // on past it), when every 8th row probed outside the regions shows clear foreground (an actor
+  // walking in, a prop put down; 3 pixels in a row), and every region_full_every frames (what
+  // the probe cannot see: something under 8 rows tall, or of the surroundings' own colour). Call
   // resetRegion() when frames stop being consecutive (a gap, a seek).
   int region_margin_px = 0;
   int region_full_every = 24;  // 0 = never
@@ -154,10 +156,11 @@ struct KeyStats {
   int specks_removed = 0;  // silhouette components removed (smaller than min_blob_px)
   int holes_filled = 0;    // holes filled (smaller than min_hole_px)
   int shadow_px = 0;       // difference keying: pixels taken for shadows on the set
-  // Region keying (KeyerOptions::region_margin_px): false when only the region was keyed; true
-  // with the reason when the whole frame was.
+  // Region keying (KeyerOptions::region_margin_px): false when only the regions were keyed;
+  // true with the reason when the whole frame was.
   bool whole_frame = true;
   std::string whole_frame_reason;
+  int keyed_px = 0;        // the regions' pixels, or the frame's when it was keyed whole
 };
 
 struct KeyResult {
@@ -209,11 +212,14 @@ class Keyer {
   std::vector<std::vector<cv::Point>> band_refined_, band_seeds_;
   std::vector<std::vector<detail::LonePixel>> band_lone_;
   // Region keying: the next frame's region (empty: key it whole) and frames since the last whole one.
-  cv::Rect region_;
+  std::vector<cv::Rect> regions_;  // disjoint
+  std::vector<cv::Rect> parts_, region_parts_;  // scratch: the boxes of the silhouette's parts
   long long frames_keyed_ = 0;
   struct Frame;
-  void keyRegion(const Frame& f, const cv::Rect& region, KeyResult& result);
-  bool foregroundOutside(const Frame& f, const cv::Rect& region);
+  // Keys 'region' of the frame into result (stats added to result.stats); 'parts' (if not null)
+  // gets the boxes of the silhouette's parts in it, in the region's coordinates.
+  void keyRegion(const Frame& f, const cv::Rect& region, KeyResult& result, std::vector<cv::Rect>* parts);
+  bool foregroundOutside(const Frame& f, const std::vector<cv::Rect>& regions);
   static bool reachesEdge(const cv::Mat& silhouette, const cv::Rect& region);
 };
 

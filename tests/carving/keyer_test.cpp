@@ -737,10 +737,9 @@ TEST(KeyerStudio, RegionKeyingMatchesWholeFramesOnConsecutiveFrames) {
       } else {
         EXPECT_FALSE(b.stats.whole_frame) << source << ": " << b.stats.whole_frame_reason;
         region_frames += !b.stats.whole_frame;
-        cv::Rect box = cv::boundingRect(a.silhouette);
-        box = cv::Rect(box.x - 48, box.y - 48, box.width + 96, box.height + 96) & cv::Rect(0, 0, frame.cols, frame.rows);
-        region_px += box.area();
+        region_px += b.stats.keyed_px;
         frame_px += frame.total();
+        EXPECT_LT(b.stats.keyed_px, static_cast<int>(frame.total()) / 2) << source;
       }
     }
   }
@@ -796,6 +795,14 @@ TEST(Keyer, RegionKeyingFallsBackToWholeFramesWhenItMustAndSaysWhy) {
     }
     EXPECT_EQ(cv::countNonZero(a.silhouette != b.silhouette), 0) << source;
     EXPECT_EQ(cv::norm(a.alpha, b.alpha, cv::NORM_INF), 0.0) << source;
+    if (step.whole_frame) {
+      EXPECT_EQ(b.stats.keyed_px, 480 * 360) << source;
+    } else if (step.newcomer) {
+      // Two parts, two regions: the last frame's actor with the arm (110..202 x 100..260) and the
+      // newcomer (420..450 x 20..32), each grown by the 16 px margin. One box around both would
+      // be 372 x 272 px.
+      EXPECT_EQ(b.stats.keyed_px, (92 + 32) * (160 + 32) + (30 + 32) * (12 + 32)) << source;
+    }
   }
   region.resetRegion();
   const KeyResult b = region.key(frame(116, true, true), "after reset");

@@ -74,6 +74,7 @@ struct LoopArgs {
   int threads = 0;
   int witness_bin = 1;
   int key_region_margin_px = live::FrameLoopOptions{}.key_region_margin_px;
+  bool key_main_whole = false;
   std::string props;
   bool no_props = false;
   // The stage's camera tracker (run only; live/tracker.h).
@@ -118,9 +119,13 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
                   "little less silhouette detail; the main camera stays at full resolution")
       ->capture_default_str();
   cmd->add_option("--key-region-margin", a.key_region_margin_px,
-                  "Key each witness only around its last frame's silhouette, grown by this many pixels (whole frames "
-                  "when something shows outside it, and in turn every 24 frames); 0 = key every frame whole")
+                  "Key each camera only around its last frame's silhouette parts, grown by this many pixels (whole "
+                  "frames when something shows outside them, and in turn every 24 frames); 0 = key every frame whole")
       ->capture_default_str();
+  cmd->add_flag("--key-main-whole", a.key_main_whole,
+                "Key the main camera's whole frame every frame (the witnesses keep --key-region-margin): what "
+                "shows outside its regions under 8 rows tall is then composited at once, not from the next "
+                "whole frame");
   cmd->add_option("--props", a.props,
                   "props.json of the tagged props to track (stage \"props\"; default: the take's props.json when it "
                   "has a prop that is not fixed to the studio)");
@@ -184,6 +189,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   o.threads = a.threads;
   o.witness_bin = a.witness_bin;
   o.key_region_margin_px = a.key_region_margin_px;
+  o.key_main_region = !a.key_main_whole;
   o.debug_layers = debug_layers;
   Rig rig = l.take->rig();
   TakeInputOptions io;
@@ -691,6 +697,7 @@ int runBench(const BenchArgs& a) {
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
                       {"witness_bin", a.loop.witness_bin},
                       {"key_region_margin_px", a.loop.key_region_margin_px},
+                      {"key_main_region", a.loop.key_region_margin_px > 0 && !a.loop.key_main_whole},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
                       {"latency_ms", t},
                       // The spread the median hides: a frame that keys a witness whole or searches a

@@ -250,10 +250,12 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
     m.binned.resize(carve_cams.size());
   }
   // Whole frames in turn: witness i's on frames i, i + every, ... (one witness a frame while
-  // there are no more witnesses than 'every', 24 by default).
+  // there are no more witnesses than 'every', 24 by default); the main camera's halfway between
+  // the last witness's and the first's next.
   const int every = std::max(1, witness_key.region_full_every);
-  for (size_t i = 0; i < m.carve_names.size(); ++i) {
-    witness_key.region_full_phase = (every - static_cast<int>(i % every)) % every;
+  const int n_carve = static_cast<int>(m.carve_names.size());
+  for (int i = 0; i < n_carve; ++i) {
+    witness_key.region_full_phase = (every - i % every) % every;
     m.keyers.emplace_back(witness_key);
   }
   m.witness_keys.resize(m.carve_names.size());
@@ -261,7 +263,9 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
   main_key.soft_alpha = true;
   main_key.remember_garbage_zone = false;  // the main camera moves
   main_key.threads = 1;
-  main_key.region_margin_px = 0;  // keyed whole: its soft alpha is what the director sees
+  main_key.region_margin_px = options.key_main_region ? options.key_region_margin_px : 0;
+  const int main_whole = n_carve < every ? (n_carve + every) / 2 : every / 2;
+  main_key.region_full_phase = (every - main_whole % every) % every;
   m.keyers.emplace_back(main_key);
   carving::HullOptions hull = options.hull;
   hull.threads = options.threads;

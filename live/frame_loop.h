@@ -72,15 +72,21 @@ struct FrameLoopOptions {
   // The witness keyers' speck / hole sizes (KeyerOptions min_blob_px, min_hole_px, in full
   // pixels) are divided by witness_bin^2.
   int witness_bin = 1;
-  // Witnesses keyed only around their last silhouette (KeyerOptions::region_margin_px): the box
-  // of the last frame's silhouette grown by this many plate pixels (divided by witness_bin),
-  // whole frames when something shows outside it, and one witness's whole frame in turn every
-  // few frames. Carving needs their binary silhouettes only, which region keying gives exactly
-  // (tests/carving/keyer_test.cpp). 0 = every frame keyed whole. Frames that are not
-  // consecutive (FrameState::frame not one past the last) are keyed whole. The main camera is
-  // always keyed whole: its soft alpha is composited, and region keying would leave the alpha of
-  // stray pixels far from the actor at 0.
+  // Witnesses keyed only around their last silhouette (KeyerOptions::region_margin_px): the
+  // boxes of the last frame's silhouette parts grown by this many plate pixels (divided by
+  // witness_bin), whole frames when something shows outside them, and one witness's whole frame
+  // in turn every few frames. Carving needs their binary silhouettes only, which region keying
+  // gives exactly (tests/carving/keyer_test.cpp). 0 = every frame keyed whole. Frames that are
+  // not consecutive (FrameState::frame not one past the last) are keyed whole.
   int key_region_margin_px = 48;
+  // The main camera keyed the same way (with the same margin; its whole frame every 24 frames
+  // falls between the witnesses'). Its silhouette is the whole key's exactly, and so is its soft
+  // alpha inside the regions; outside them the alpha is 0 where a whole key leaves a few stray
+  // pixels of sensor noise at a small alpha, never silhouette (tests/carving/keyer_test.cpp: at
+  // most 50 a frame). What it gives up: something new outside the regions that the probed rows
+  // do not see (under 8 rows tall) is composited from the next whole frame, at most 24 frames
+  // on. false = the main camera keyed whole on every frame.
+  bool key_main_region = true;
   int threads = 0;                          // OpenMP threads (0 = default)
   void validate() const;                    // throws Error naming the field
 };

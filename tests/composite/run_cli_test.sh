@@ -76,10 +76,18 @@ PY
 then ok "run's prop poses equal previz track's and meet the truth (<= 2 mm, 0.5 deg)"; else fail "run prop poses"; fi
 
 # previz composite on run's depth: the same key and depth give the same composites, bit for bit.
-if "$bin" composite --take "$take" --depth "$tmp/run/depth" --out "$tmp/comp" --json --quiet > "$tmp/comp.json" 2> "$tmp/comp.err"; then
+# previz composite keys every main frame whole, so run does too here (--key-main-whole); by
+# default run keys the main camera's consecutive frames by region, whose alpha differs from the
+# whole key's only on stray pixels outside the regions (tests/carving/keyer_test.cpp).
+"$bin" run --take "$take" --out "$tmp/run_whole" --voxel 0.02 --key-main-whole --no-props --quiet 2> "$tmp/runw.err" \
+  || fail "run --key-main-whole: $(cat "$tmp/runw.err")"
+if "$bin" composite --take "$take" --depth "$tmp/run_whole/depth" --out "$tmp/comp" --json --quiet > "$tmp/comp.json" 2> "$tmp/comp.err"; then
   ok "composite exits 0"; else fail "composite: $(cat "$tmp/comp.err")"; fi
 same=1
-for f in 000000 000001 000002; do cmp -s "$tmp/run/composite/$f.png" "$tmp/comp/composite/$f.png" || same=0; done
+for f in 000000 000001 000002; do
+  cmp -s "$tmp/run_whole/composite/$f.png" "$tmp/comp/composite/$f.png" || same=0
+  cmp -s "$tmp/run_whole/depth/$f.exr" "$tmp/run/depth/$f.exr" || same=0  # the same silhouettes
+done
 [ $same -eq 1 ] && ok "composite equals run's composite" || fail "composite differs from run's"
 python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['command']=='composite' and j['actor_px'] > 1000 and j['fallback_px'] < 0.01 * j['actor_px'], j" "$tmp/comp.json" \
   && ok "composite JSON" || fail "composite JSON"
@@ -95,6 +103,7 @@ assert 0 <= j["props_full_frame_fraction"] <= 1, j
 assert j["noise_sigma"] == json.load(open(sys.argv[2]))["options"]["noise_sigma"], j
 assert j["latency_ms"] >= j["ms"] * 0.999, j
 assert 0 < j["ms_mean"] <= j["ms_max"] and j["ms"] <= j["ms_p95"] <= j["ms_max"], j
+assert j["key_region_margin_px"] == 48 and j["key_main_region"] is True, j
 # The frames' quality against the take's truth stays where it is (measured on this take: witness
 # IoU min 0.963, median 0.985; depth within 0.05 mm of the exact hull at p95, 2 of 3778 pixels
 # with depth in one only; composite PSNR over the actor 30.3 dB).
@@ -108,6 +117,9 @@ assert all(r["ms"] > 0 and r["cpu_ms"] > 0 and r["fps"] > 0 and r["speedup"] > 0
 assert j["scaling"][0]["speedup"] == 1, j
 PY
 then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
+"$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 --key-main-whole 2>/dev/null |
+  python3 -c 'import json, sys; j = json.loads(sys.stdin.read()); assert j["key_main_region"] is False, j' \
+  && ok "bench run --key-main-whole" || fail "bench run --key-main-whole"
 
 # Failures that name the culprit.
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet

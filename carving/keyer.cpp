@@ -792,9 +792,25 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   // (a background pixel being refined is not its own B). Most refined pixels of a noisy plate
   // are unknown pixels inside a dark costume part; reading their window's colours is the cost.
   bool any_bg = false;
-  for (int yy = y0; yy <= y1 && !any_bg; ++yy) {
-    const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
-    for (int xx = x0; xx <= x1; ++xx) any_bg |= c[xx] <= kGarbage && (xx != x || yy != y);
+  if (__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__ && 2 * radius + 1 <= 8 && x - radius >= 0 &&
+      x - radius + 8 <= cls.cols) {
+    // A window row's classes as one word (byte i = pixel x - radius + i), the bytes past the
+    // window and the pixel itself made non-background; background is a byte <= 1, a zero byte
+    // once the low bit is masked, found by the zero-byte test (exact, no false hits).
+    const int width = 2 * radius + 1;
+    const std::uint64_t outside = width == 8 ? 0 : ~0ull << (8 * width);
+    for (int yy = y0; yy <= y1 && !any_bg; ++yy) {
+      std::uint64_t v;
+      std::memcpy(&v, cls.ptr<std::uint8_t>(yy) + (x - radius), 8);
+      if (yy == y) v |= 0xFFull << (8 * radius);
+      v = (v & 0xFEFEFEFEFEFEFEFEull) | outside;
+      any_bg = ((v - 0x0101010101010101ull) & ~v & 0x8080808080808080ull) != 0;
+    }
+  } else {
+    for (int yy = y0; yy <= y1 && !any_bg; ++yy) {
+      const std::uint8_t* c = cls.ptr<std::uint8_t>(yy);
+      for (int xx = x0; xx <= x1; ++xx) any_bg |= c[xx] <= kGarbage && (xx != x || yy != y);
+    }
   }
   if (!any_bg) return -1.0f;
   // The window's sums per class, accumulated in scan order in locals (kept in registers: a sum

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <omp.h>
@@ -58,6 +60,59 @@ struct PropTracker::Impl {
   std::vector<Track> tracks;  // per tracked prop
   int frames_since_full = 0;
   bool any_frame = false;
+  // The frame between begin() and finish(): its result so far, each camera's tags, its images.
+  struct Pending {
+    TrackFrame out;
+    std::vector<std::vector<TagDetection>> found;
+    const std::vector<cv::Mat>* images = nullptr;
+    std::vector<double> search_ms;  // each camera's search, wall
+    int frames_since_full = 0;      // the whole-frame schedule once this frame is finished
+  };
+  std::optional<Pending> pending;
+
+  // Camera c's search of the regions planned in pending->out.search[c] (its whole frame, or
+  // the predicted regions) into its found[c]: a failure is recorded, never thrown (it runs on
+  // OpenMP threads, STYLE.md rule 11).
+  void search(int c) {
+    CameraSearch& s = pending->out.search[static_cast<size_t>(c)];
+    std::vector<TagDetection>& found = pending->found[static_cast<size_t>(c)];
+    found.clear();
+    if (!s.failure.empty()) return;
+    const Stopwatch t;
+    try {
+      TagDetector& d = detectors[static_cast<size_t>(c)];
+      found = d.detect((*pending->images)[static_cast<size_t>(c)], s.rois);
+      s.noise = d.lastNoise();
+      s.blur = d.lastSigma();
+      s.detections = static_cast<int>(found.size());
+    } catch (const std::exception& e) {
+      s.failure = e.what();
+    }
+    pending->search_ms[static_cast<size_t>(c)] = t.ms();
+  }
+
+  TrackFrame finish(double detect_ms);
+
+  // Plans camera c's search: its whole frame or the predicted regions at time_s.
+  void plan(int c, bool whole_frame, double time_s) {
+    CameraSearch& s = pending->out.search[static_cast<size_t>(c)];
+    s = CameraSearch{};
+    s.camera = cameras[static_cast<size_t>(c)].camera.name;
+    const cv::Mat& img = (*pending->images)[static_cast<size_t>(c)];
+    const Camera& cam = cameras[static_cast<size_t>(c)].camera;
+    if (img.empty()) {
+      s.failure = "no image";
+      return;
+    }
+    if (img.cols != cam.width || img.rows != cam.height) {
+      s.failure = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", camera is " +
+                  std::to_string(cam.width) + "x" + std::to_string(cam.height);
+      return;
+    }
+    s.full_frame = whole_frame;
+    s.rois = whole_frame ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : predictedRois(c, time_s);
+    for (const cv::Rect& r : s.rois) s.pixels += r.area();
+  }
 
   // Regions of camera c where the tracked props should appear at time_s.
   std::vector<cv::Rect> predictedRois(int c, double time_s) const {
@@ -147,14 +202,28 @@ void PropTracker::reset() {
 }
 
 TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Mat>& images) {
+  begin(frame, time_s, images);
+  const int n_cams = static_cast<int>(impl_->cameras.size());
+  const Stopwatch t_detect;
+#pragma omp parallel for schedule(dynamic) num_threads(resolveThreads(impl_->options.threads))
+  for (int c = 0; c < n_cams; ++c) impl_->search(c);
+  return impl_->finish(t_detect.ms());
+}
+
+std::vector<long long> PropTracker::begin(int frame, double time_s, const std::vector<cv::Mat>& images) {
   Impl& m = *impl_;
-  const Stopwatch t_start;
+  m.pending.reset();
   const int n_cams = static_cast<int>(m.cameras.size());
   if (static_cast<int>(images.size()) != n_cams)
     throw Error("track: " + std::to_string(images.size()) + " images for " + std::to_string(n_cams) +
                     " cameras",
                 ErrorContext{"", "", frame, ""});
-  TrackFrame out;
+  m.pending.emplace();
+  Impl::Pending& pending = *m.pending;
+  pending.images = &images;
+  pending.found.resize(static_cast<size_t>(n_cams));
+  pending.search_ms.assign(static_cast<size_t>(n_cams), 0.0);
+  TrackFrame& out = pending.out;
   out.frame = frame;
   out.time_s = time_s;
   out.search.resize(static_cast<size_t>(n_cams));
@@ -169,50 +238,46 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
   // 1280x720 frame costs about as much as 10 ROI frames: bench_tracking).
   const bool full = !m.options.roi || !m.any_frame || !all_live;
   const int every = m.options.full_frame_every;
-  m.frames_since_full = full ? 0 : m.frames_since_full + 1;
-  m.any_frame = true;
+  // The schedule moves on when the frame is finished (a begin() without finish() changes nothing).
+  pending.frames_since_full = full ? 0 : m.frames_since_full + 1;
   std::vector<char> whole(static_cast<size_t>(n_cams), full ? 1 : 0);
   if (!full && every > 0)
     for (int c = 0; c < n_cams; ++c)
-      whole[static_cast<size_t>(c)] = (m.frames_since_full + c * every / n_cams) % every == 0;
+      whole[static_cast<size_t>(c)] = (pending.frames_since_full + c * every / n_cams) % every == 0;
   out.full_frame = std::all_of(whole.begin(), whole.end(), [](char w) { return w != 0; });
+  std::vector<long long> pixels(static_cast<size_t>(n_cams));
+  for (int c = 0; c < n_cams; ++c) {
+    m.plan(c, whole[static_cast<size_t>(c)] != 0, time_s);
+    pixels[static_cast<size_t>(c)] = out.search[static_cast<size_t>(c)].pixels;
+  }
+  return pixels;
+}
 
-  // Detection, one camera per iteration; errors are recorded per camera (STYLE.md rule 11).
-  std::vector<std::vector<TagDetection>> found(static_cast<size_t>(n_cams));
+void PropTracker::search(int camera) {
+  if (!impl_->pending) throw Error("track: search() without begin()");
+  if (camera < 0 || camera >= static_cast<int>(impl_->cameras.size()))
+    throw Error("track: camera index " + std::to_string(camera) + " out of range");
+  impl_->search(camera);
+}
+
+TrackFrame PropTracker::finish() {
+  if (!impl_->pending) throw Error("track: finish() without begin()");
+  const std::vector<double>& ms = impl_->pending->search_ms;
+  return impl_->finish(std::accumulate(ms.begin(), ms.end(), 0.0));
+}
+
+// The frame's searches took detect_ms (wall, or the cameras' times summed when the caller ran them).
+TrackFrame PropTracker::Impl::finish(double detect_ms) {
+  Impl& m = *this;
+  Impl::Pending& pending = *m.pending;
+  TrackFrame& out = pending.out;
+  std::vector<std::vector<TagDetection>>& found = pending.found;
+  const double time_s = out.time_s;
+  const int n_cams = static_cast<int>(m.cameras.size());
   const int threads = resolveThreads(m.options.threads);
-  // Camera c's search, its whole frame or the predicted regions, into out.search[c] and found[c].
-  const auto search = [&](int c, bool whole_frame) {
-    CameraSearch& s = out.search[static_cast<size_t>(c)];
-    s = CameraSearch{};
-    s.camera = m.cameras[static_cast<size_t>(c)].camera.name;
-    found[static_cast<size_t>(c)].clear();
-    try {
-      const cv::Mat& img = images[static_cast<size_t>(c)];
-      const Camera& cam = m.cameras[static_cast<size_t>(c)].camera;
-      if (img.empty()) {
-        s.failure = "no image";
-        return;
-      }
-      if (img.cols != cam.width || img.rows != cam.height) {
-        s.failure = "image is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) + ", camera is " +
-                    std::to_string(cam.width) + "x" + std::to_string(cam.height);
-        return;
-      }
-      s.full_frame = whole_frame;
-      s.rois = s.full_frame ? std::vector<cv::Rect>{cv::Rect(0, 0, img.cols, img.rows)} : m.predictedRois(c, time_s);
-      for (const cv::Rect& r : s.rois) s.pixels += r.area();
-      found[static_cast<size_t>(c)] = m.detectors[static_cast<size_t>(c)].detect(img, s.rois);
-      s.noise = m.detectors[static_cast<size_t>(c)].lastNoise();
-      s.blur = m.detectors[static_cast<size_t>(c)].lastSigma();
-      s.detections = static_cast<int>(found[static_cast<size_t>(c)].size());
-    } catch (const std::exception& e) {
-      s.failure = e.what();
-    }
-  };
-  const Stopwatch t_detect;
-#pragma omp parallel for schedule(dynamic) num_threads(threads)
-  for (int c = 0; c < n_cams; ++c) search(c, whole[static_cast<size_t>(c)] != 0);
-  out.detect_ms = t_detect.ms();
+  out.detect_ms = detect_ms;
+  m.frames_since_full = pending.frames_since_full;
+  m.any_frame = true;
 
   // Tags -> props.
   const Stopwatch t_solve;
@@ -273,8 +338,9 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
     std::fill(again.begin(), again.end(), 0);  // nothing new to solve from: those props are lost
   } else {
     const Stopwatch t_again;
+    for (const int c : rescan) m.plan(c, true, time_s);
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
-    for (int i = 0; i < static_cast<int>(rescan.size()); ++i) search(rescan[static_cast<size_t>(i)], true);
+    for (int i = 0; i < static_cast<int>(rescan.size()); ++i) m.search(rescan[static_cast<size_t>(i)]);
     rescan_ms = t_again.ms();
     out.detect_ms += rescan_ms;
     out.rescanned_cameras = static_cast<int>(rescan.size());
@@ -309,8 +375,10 @@ TrackFrame PropTracker::track(int frame, double time_s, const std::vector<cv::Ma
     out.props.push_back(std::move(r));
   }
   out.solve_ms = t_solve.ms() - rescan_ms;
-  out.total_ms = t_start.ms();
-  return out;
+  out.total_ms = out.detect_ms + out.solve_ms;
+  TrackFrame done = std::move(out);
+  m.pending.reset();
+  return done;
 }
 
 nlohmann::json trackFrameToJson(const TrackFrame& f) {

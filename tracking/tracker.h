@@ -87,6 +87,20 @@ class PropTracker {
 
   // images[i] is camera i's frame (8-bit grey or BGR; empty = no image this frame, reported).
   TrackFrame track(int frame, double time_s, const std::vector<cv::Mat>& images);
+  // track() in three steps, for a caller that runs the cameras' searches among work of its own
+  // in one pool of threads (the live loop searches while it keys, live/frame_loop.h); track() is
+  // the three steps with the searches over OpenMP, and gives the same frame.
+  //   begin(): checks the images and plans each camera's search (its whole frame or the predicted
+  //     regions); returns the pixels each camera will search (0: nothing, e.g. no image);
+  //   search(c): camera c's search, from any thread, each camera once; the images must outlive it;
+  //   finish(): the same-frame whole-frame search of a prop its regions missed, the solve and the
+  //     filter. TrackFrame::detect_ms is then the cameras' search times summed (track(): the
+  //     searches' wall time).
+  // A begin() without its finish() (the caller's frame failed) changes nothing: the next begin()
+  // forgets it.
+  std::vector<long long> begin(int frame, double time_s, const std::vector<cv::Mat>& images);
+  void search(int camera);
+  TrackFrame finish();
   // A moving camera (the main camera on its dolly): its pose from this frame on.
   void setCameraPose(int camera, const Pose& T_world_cam);
   // Forget every track (next frame searches the full frames).

@@ -65,6 +65,42 @@ TEST(PropTracker, RoiSearchFindsTheSameTagsAsFullFrames) {
   EXPECT_GE(same, static_cast<int>(std::ceil(0.99 * frames)));
 }
 
+// track() in steps (begin, each camera's search in any order, finish), as the live loop runs
+// them among its keys: the same frames as track(), each camera planned with the pixels it then
+// searches; a step out of order is an error, and a begin() whose frame was never finished (the
+// caller's frame failed) is forgotten by the next one.
+TEST(PropTracker, StepsGiveTheSameFramesAsTrack) {
+  test::StudioFixture fx(std::filesystem::path(PREVIZ_TEST_TMP) / "tracking_stage_cache");
+  TrackerOptions o;
+  o.threads = 2;
+  o.full_frame_every = 3;  // whole-frame and region searches both
+  PropTracker whole(fx.rig.cameras, test::studioProps(fx.studio), o);
+  PropTracker steps(fx.rig.cameras, test::studioProps(fx.studio), o);
+  EXPECT_THROW(steps.finish(), Error);
+  EXPECT_THROW(steps.search(0), Error);
+  const int n = fx.cameras();
+  for (int f = 0; f < 6; ++f) {
+    const double t = 2.0 + f / kFps;
+    const std::vector<cv::Mat> images = fx.renderTake(t, f, 24);
+    const TrackFrame a = whole.track(f, t, images);
+    if (f == 2) steps.begin(f, t, images);  // abandoned: the next begin() starts over
+    const std::vector<long long> px = steps.begin(f, t, images);
+    ASSERT_EQ(static_cast<int>(px.size()), n);
+    EXPECT_THROW(steps.search(n), Error);
+    for (int c = n - 1; c >= 0; --c) steps.search(c);  // any order
+    const TrackFrame b = steps.finish();
+    EXPECT_THROW(steps.finish(), Error);  // once a frame
+    nlohmann::json ja = trackFrameToJson(a), jb = trackFrameToJson(b);
+    ja.erase("ms");
+    jb.erase("ms");
+    EXPECT_EQ(ja, jb) << "frame " << f;
+    ASSERT_TRUE(b.props[0].tracked) << "frame " << f;
+    for (int c = 0; c < n; ++c) EXPECT_EQ(px[static_cast<size_t>(c)], b.search[static_cast<size_t>(c)].pixels);
+    EXPECT_GT(b.detect_ms, 0);
+    EXPECT_DOUBLE_EQ(b.total_ms, b.detect_ms + b.solve_ms);
+  }
+}
+
 // The periodic whole-frame search is staggered over the cameras: each camera searches its whole
 // frame every full_frame_every frames, never all of them on the same frame (which cost a 66 ms
 // frame every 30 in the live loop: 8 whole 1280x720 frames at once).

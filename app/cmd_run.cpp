@@ -75,6 +75,7 @@ struct LoopArgs {
   int witness_bin = 1;
   int key_region_margin_px = live::FrameLoopOptions{}.key_region_margin_px;
   bool key_main_whole = false;
+  bool props_own_pool = false;
   std::string props;
   bool no_props = false;
   // The stage's camera tracker (run only; live/tracker.h).
@@ -126,6 +127,9 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
                 "Key the main camera's whole frame every frame (the witnesses keep --key-region-margin): what "
                 "shows outside its regions under 8 rows tall is then composited at once, not from the next "
                 "whole frame");
+  cmd->add_flag("--props-own-pool", a.props_own_pool,
+                "Search the plates for tags in a pool of threads of the props stage's own, not among the key "
+                "stage's cameras (the same poses; to compare)");
   cmd->add_option("--props", a.props,
                   "props.json of the tagged props to track (stage \"props\"; default: the take's props.json when it "
                   "has a prop that is not fixed to the studio)");
@@ -190,6 +194,7 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   o.witness_bin = a.witness_bin;
   o.key_region_margin_px = a.key_region_margin_px;
   o.key_main_region = !a.key_main_whole;
+  o.pool_with_key = !a.props_own_pool;
   o.debug_layers = debug_layers;
   Rig rig = l.take->rig();
   TakeInputOptions io;
@@ -698,6 +703,7 @@ int runBench(const BenchArgs& a) {
                       {"witness_bin", a.loop.witness_bin},
                       {"key_region_margin_px", a.loop.key_region_margin_px},
                       {"key_main_region", a.loop.key_region_margin_px > 0 && !a.loop.key_main_whole},
+                      {"props_pooled_with_key", l.props != nullptr && !a.loop.props_own_pool},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
                       {"latency_ms", t},
                       // The spread the median hides: a frame that keys a witness whole or searches a

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cmath>
+#include <numeric>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -20,6 +21,14 @@
 
 namespace previz::live {
 namespace {
+
+double cpuMs(clockid_t clock) {
+  timespec t{};
+  clock_gettime(clock, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+double processCpuMs() { return cpuMs(CLOCK_PROCESS_CPUTIME_ID); }
+double threadCpuMs() { return cpuMs(CLOCK_THREAD_CPUTIME_ID); }
 
 Error frameError(const std::string& stage, int frame, const std::exception& e) {
   ErrorContext c;
@@ -112,6 +121,18 @@ struct FrameLoop::Impl {
   cv::Mat foreground;
   cv::Mat main_depth;                 // likewise
   std::optional<int> last_frame;      // the last frame keyed (region keying needs consecutive ones)
+  // Work pooled with the key stage (FrameLoop::poolWithKey), each with its items' time a pixel
+  // as measured (thread CPU ms, averaged over the last frames; the first guess is libapriltag's
+  // on a witness's regions, bench_tracking).
+  struct Pooled {
+    PooledWork work;
+    double ms_per_px = 30e-6;
+  };
+  std::vector<Pooled> pooled;
+  std::vector<double> key_ms;         // each camera's last key (thread CPU ms; < 0: none yet)
+  // This frame's share of the key stage's time owed to each pooled work's stage (the fraction
+  // of the pool's CPU time its items took), added to that stage's time by run().
+  std::vector<double> pooled_share;
 
   int threads() const { return resolveThreads(options.threads); }
 
@@ -127,12 +148,54 @@ struct FrameLoop::Impl {
     if (!last_frame || s.frame != *last_frame + 1)
       for (carving::Keyer& k : keyers) k.resetRegion();
     last_frame = s.frame;
-    // One item per camera, dynamic scheduling, the largest first: the main camera (index n; 2x
-    // a witness's pixels, soft alpha and despill), so that the witnesses fill in around it. No
-    // exception leaves the region (STYLE.md rule 11).
+    // The pool's items: every camera's key (index n: the main camera) and the pooled work's,
+    // each with its expected time, run longest first with dynamic scheduling so that the threads
+    // finish together (a witness's key is 1-4 ms on the bench take, the main camera's 8, a tag
+    // search of a witness's regions under 1, of a whole frame 18-40). No exception leaves the
+    // region (STYLE.md rule 11).
+    struct Item {
+      int work;   // -1: a camera's key, else the index into 'pooled'
+      int index;  // the camera, or the work's item
+      long long px;
+      double expected_ms;
+    };
+    std::vector<Item> items;
+    for (int i = 0; i <= n; ++i) {
+      const cv::Mat& plate = i < n ? s.witness_plates[i] : s.main_plate;
+      // Not keyed yet: about 4 ns a plate pixel, the main camera's twice (soft alpha, despill).
+      const double guess = 4e-6 * static_cast<double>(plate.total()) * (i < n ? 1 : 2);
+      items.push_back({-1, i, 0, key_ms[i] >= 0 ? key_ms[i] : guess});
+    }
+    for (size_t w = 0; w < pooled.size(); ++w) {
+      std::vector<long long> px;
+      try {
+        px = pooled[w].work.plan(s);
+      } catch (const std::exception& e) {
+        throw Error(pooled[w].work.stage + ": " + e.what());
+      }
+      for (size_t i = 0; i < px.size(); ++i)
+        if (px[i] > 0)
+          items.push_back({static_cast<int>(w), static_cast<int>(i), px[i], pooled[w].ms_per_px * px[i]});
+    }
+    std::stable_sort(items.begin(), items.end(),
+                     [](const Item& a, const Item& b) { return a.expected_ms > b.expected_ms; });
+    std::vector<double> cpu_ms(items.size(), 0.0);
+    std::vector<std::string> work_errors(pooled.size());
 #pragma omp parallel for schedule(dynamic) num_threads(threads())
-    for (int item = 0; item <= n; ++item) {
-      const int i = n - item;
+    for (int t = 0; t < static_cast<int>(items.size()); ++t) {
+      const Item& item = items[t];
+      const double cpu0 = threadCpuMs();
+      if (item.work >= 0) {
+        try {
+          pooled[item.work].work.item(item.index);
+        } catch (const std::exception& e) {
+#pragma omp critical(previz_pooled_errors)
+          work_errors[item.work] = e.what();
+        }
+        cpu_ms[t] = threadCpuMs() - cpu0;
+        continue;
+      }
+      const int i = item.index;
       try {
         if (i < n) {
           if (!s.dropped[i].empty() || s.witness_plates[i].empty()) {
@@ -151,6 +214,27 @@ struct FrameLoop::Impl {
       } catch (const std::exception& e) {
         errors[i] = e.what();
       }
+      cpu_ms[t] = threadCpuMs() - cpu0;
+    }
+    // What each item took teaches the next frame's order; the CPU time shares the stage's time.
+    double key_cpu = 0;
+    std::vector<double> work_cpu(pooled.size(), 0.0);
+    std::vector<long long> work_px(pooled.size(), 0);
+    for (size_t t = 0; t < items.size(); ++t) {
+      if (items[t].work < 0) {
+        key_ms[items[t].index] = cpu_ms[t];
+        key_cpu += cpu_ms[t];
+      } else {
+        work_cpu[items[t].work] += cpu_ms[t];
+        work_px[items[t].work] += items[t].px;
+      }
+    }
+    const double pool_cpu = key_cpu + std::accumulate(work_cpu.begin(), work_cpu.end(), 0.0);
+    pooled_share.assign(pooled.size(), 0.0);
+    for (size_t w = 0; w < pooled.size(); ++w) {
+      if (work_px[w] > 0) pooled[w].ms_per_px = 0.5 * pooled[w].ms_per_px + 0.5 * work_cpu[w] / work_px[w];
+      if (pool_cpu > 0) pooled_share[w] = work_cpu[w] / pool_cpu;
+      if (!work_errors[w].empty()) throw Error(pooled[w].work.stage + ": " + work_errors[w]);
     }
     for (int i = 0; i < n; ++i)
       if (!errors[i].empty()) s.dropped[i] = "keying failed: " + errors[i];
@@ -259,6 +343,7 @@ FrameLoop::FrameLoop(const Rig& rig, const Camera& cg, const FrameLoopOptions& o
     m.keyers.emplace_back(witness_key);
   }
   m.witness_keys.resize(m.carve_names.size());
+  m.key_ms.assign(m.carve_names.size() + 1, -1.0);
   carving::KeyerOptions main_key = options.keyer;
   main_key.soft_alpha = true;
   main_key.remember_garbage_zone = false;  // the main camera moves
@@ -299,17 +384,40 @@ void FrameLoop::insertStage(const std::string& after, const std::string& name, S
   st.insert(it + 1, {name, std::move(fn)});
 }
 
-namespace {
-double processCpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+void FrameLoop::poolWithKey(PooledWork work) {
+  Impl& m = *impl_;
+  const auto it = std::find_if(m.stages.begin(), m.stages.end(), [&](const auto& s) { return s.first == work.stage; });
+  if (it == m.stages.end() || work.stage == "key")
+    throw Error("run: no stage '" + work.stage + "' to pool work of with the key stage", fieldContext("stage"));
+  if (m.options.pool_with_key) {
+    m.pooled.push_back({std::move(work)});
+    return;
+  }
+  // A pool of its own at the start of its stage.
+  it->second = [work = std::move(work), stage = std::move(it->second), &m](FrameState& s) {
+    const std::vector<long long> px = work.plan(s);
+    std::vector<std::string> errors(px.size());
+#pragma omp parallel for schedule(dynamic) num_threads(m.threads())
+    for (int i = 0; i < static_cast<int>(px.size()); ++i) {
+      if (px[i] <= 0) continue;
+      try {
+        work.item(i);
+      } catch (const std::exception& e) {
+        errors[i] = e.what();
+      }
+    }
+    for (const std::string& e : errors)
+      if (!e.empty()) throw Error(e);
+    stage(s);
+  };
 }
-}  // namespace
 
 std::vector<StageTime> FrameLoop::run(FrameState& state) {
+  Impl& m = *impl_;
   std::vector<StageTime> times;
-  for (auto& [name, fn] : impl_->stages) {
+  m.pooled_share.assign(m.pooled.size(), 0.0);
+  StageTime key_pool;  // the key stage's whole time, shared with the pooled work's stages
+  for (auto& [name, fn] : m.stages) {
     const Stopwatch start;
     const double cpu0 = processCpuMs();
     try {
@@ -317,8 +425,20 @@ std::vector<StageTime> FrameLoop::run(FrameState& state) {
     } catch (const std::exception& e) {
       throw frameError(name, state.frame, e);
     }
-    times.push_back({name, start.ms(),
-                     processCpuMs() - cpu0});
+    StageTime t{name, start.ms(), processCpuMs() - cpu0};
+    if (name == "key") {
+      key_pool = t;
+      for (const double f : m.pooled_share) {
+        t.ms -= f * key_pool.ms;
+        t.cpu_ms -= f * key_pool.cpu_ms;
+      }
+    }
+    for (size_t w = 0; w < m.pooled.size(); ++w)
+      if (name == m.pooled[w].work.stage) {
+        t.ms += m.pooled_share[w] * key_pool.ms;
+        t.cpu_ms += m.pooled_share[w] * key_pool.cpu_ms;
+      }
+    times.push_back(t);
   }
   return times;
 }
@@ -340,19 +460,27 @@ PropStage::PropStage(const FrameLoop& loop, const Rig& rig, tracking::PropSet pr
 
 PropStage::~PropStage() = default;
 
-void PropStage::operator()(FrameState& s) {
+double PropStage::prepare(const FrameState& s) {
   const double t = s.frame / options_.fps;
   if (any_ && (t <= last_time_s_ || t - last_time_s_ > options_.tracker.filter.max_gap_s)) tracker_->reset();
   any_ = true;
   last_time_s_ = t;
   tracker_->setCameraPose(main_index_, s.main.T_world_cam);
-  std::vector<cv::Mat> images = s.witness_plates;
-  images.push_back(s.main_plate);
-  s.props = tracker_->track(s.frame, t, images);
+  images_ = s.witness_plates;
+  images_.push_back(s.main_plate);
+  return t;
+}
+
+void PropStage::operator()(FrameState& s) {
+  const double t = prepare(s);
+  s.props = tracker_->track(s.frame, t, images_);
 }
 
 void PropStage::addTo(FrameLoop& loop) {
-  loop.insertStage("depth", "props", [this](FrameState& s) { (*this)(s); });
+  loop.insertStage("depth", "props", [this](FrameState& s) { s.props = tracker_->finish(); });
+  loop.poolWithKey({"props",
+                    [this](FrameState& s) { return tracker_->begin(s.frame, prepare(s), images_); },
+                    [this](int camera) { tracker_->search(camera); }});
 }
 
 }  // namespace previz::live

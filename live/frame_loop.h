@@ -14,7 +14,9 @@
 //   carve     visual hull from the witness silhouettes (carving/hull.h)
 //   depth     the hull's depth for the main camera at this frame's pose, inside its key
 //   props     (optional, PropStage below) AprilTag-tagged props from the carving cameras' and
-//             the main camera's plates (tracking/tracker.h), inserted after "depth"
+//             the main camera's plates (tracking/tracker.h), inserted after "depth"; its
+//             cameras' tag searches run among the keys, in the key stage's pool of threads
+//             (poolWithKey), and the stage solves and filters the poses
 //   composite keyed main plate over the CG frame, depth-aware (composite/compositor.h)
 // One frame is a function of (rig, camera frames, CG frame) plus the keyers' per-camera screen
 // models (ARCHITECTURE.md) and, with the props stage, the prop tracker's filters and ROIs
@@ -87,6 +89,11 @@ struct FrameLoopOptions {
   // do not see (under 8 rows tall) is composited from the next whole frame, at most 24 frames
   // on. false = the main camera keyed whole on every frame.
   bool key_main_region = true;
+  // Work a later stage pools with the key stage (FrameLoop::poolWithKey: the props stage's tag
+  // searches) runs in the key stage's pool of threads, among the cameras' keys, so that neither
+  // waits alone for its slowest camera. false = it runs as its own pool at the start of its stage
+  // (the same results).
+  bool pool_with_key = true;
   int threads = 0;                          // OpenMP threads (0 = default)
   void validate() const;                    // throws Error naming the field
 };
@@ -141,6 +148,21 @@ class FrameLoop {
   const composite::Compositor& compositor() const;
   // Adds a stage after the one named (throws Error naming 'after' when there is none).
   void insertStage(const std::string& after, const std::string& name, StageFn fn);
+  // Per-camera work of the stage named 'stage' that does not need the keys (the props stage's
+  // tag searches), run among the cameras' keys in the key stage's pool of threads, the items
+  // longest first (each one's time estimated from the last frames: keys by camera, work by
+  // pixel), so that the pool's threads finish together. plan(state) runs before the keys and
+  // returns each item's pixels (0 = no item); item(i) runs on any thread, once for each planned
+  // item, and must not throw (it records its failures for its stage). The key stage's wall and
+  // CPU time are shared between "key" and 'stage' in proportion to the CPU time their items took.
+  // With FrameLoopOptions::pool_with_key false, plan and the items run as a pool of their own at
+  // the start of 'stage'. Throws Error naming 'stage' when there is no such stage.
+  struct PooledWork {
+    std::string stage;
+    std::function<std::vector<long long>(FrameState&)> plan;
+    std::function<void(int)> item;
+  };
+  void poolWithKey(PooledWork work);
 
   // Runs every stage on the state; returns each stage's wall time in order. Throws Error naming
   // the frame (and camera) when a stage fails; a dropped witness only leaves the carve.
@@ -173,12 +195,18 @@ class PropStage {
   PropStage(const PropStage&) = delete;
   PropStage& operator=(const PropStage&) = delete;
   void operator()(FrameState& s);
-  // Inserts this stage into the loop after "depth" as "props" (the stage must outlive the loop's runs).
+  // Inserts this stage into the loop after "depth" as "props", its cameras' tag searches pooled
+  // with the key stage (FrameLoop::poolWithKey); the stage must outlive the loop's runs.
   void addTo(FrameLoop& loop);
   const tracking::PropTracker& tracker() const { return *tracker_; }
 
  private:
+  // Restarts the tracker when time ran back or jumped, sets the main camera's pose, gathers the
+  // plates; returns the frame's time.
+  double prepare(const FrameState& s);
+
   std::unique_ptr<tracking::PropTracker> tracker_;
+  std::vector<cv::Mat> images_;  // the frame's plates: carving cameras', then the main camera's
   PropStageOptions options_;
   int main_index_ = 0;
   bool any_ = false;

@@ -50,18 +50,24 @@ if "$bin" run --take "$take" --out "$tmp/run_noprops" --voxel 0.02 --no-props --
 # the truth. Measured: 0.11 and 0.29 mm, sigma 0.2 mm, from 5 cameras.
 if "$bin" synth --preset studio --out "$tmp/ptake" --frames 2 --cams 4 --size 1280x720 --main-size 960x540 --no-meshes --quiet >/dev/null 2>&1 \
    && "$bin" run --take "$tmp/ptake" --out "$tmp/prun" --voxel 0.04 --quiet 2> "$tmp/prun.err" \
+   && "$bin" run --take "$tmp/ptake" --out "$tmp/prun_own" --voxel 0.04 --props-own-pool --quiet 2>> "$tmp/prun.err" \
    && "$bin" track --take "$tmp/ptake" --rig "$tmp/ptake/truth/rig.json" --props "$tmp/ptake/props.json" \
         --main-poses "$tmp/ptake/truth/main_poses.jsonl" --out "$tmp/ptrack" --quiet 2> "$tmp/ptrack.err"; then
   ok "run and track on the props take"; else fail "props take: $(cat "$tmp/prun.err" "$tmp/ptrack.err" 2>/dev/null)"; fi
-if python3 - "$tmp/prun/props.jsonl" "$tmp/ptrack/poses.jsonl" "$tmp/ptake/truth/props.jsonl" <<'PY'
+# The tag searches run among the keys by default; --props-own-pool runs them at the props stage
+# in a pool of their own: the same lines.
+if python3 - "$tmp/prun/props.jsonl" "$tmp/ptrack/poses.jsonl" "$tmp/ptake/truth/props.jsonl" "$tmp/prun_own/props.jsonl" <<'PY'
 import json, math, sys
 run = [json.loads(l) for l in open(sys.argv[1])]
 track = [json.loads(l) for l in open(sys.argv[2])]
 truth = {j["frame"]: {p["id"]: p["T_world_prop"] for p in j["props"]} for j in map(json.loads, open(sys.argv[3]))}
+own = [json.loads(l) for l in open(sys.argv[4])]
 assert [j["frame"] for j in run] == [0, 1] == [j["frame"] for j in track], (run, track)
 def strip(j):  # timings differ run to run
     j = dict(j); j.pop("ms"); return j
 assert [strip(j) for j in run] == [strip(j) for j in track], "run's props.jsonl differs from previz track's"
+assert [strip(j) for j in own] == [strip(j) for j in run], "run --props-own-pool differs from run"
+assert all(j["ms"]["detect"] > 0 and j["ms"]["total"] >= j["ms"]["detect"] for j in run + own), run + own
 for j in run:
     for p in j["props"]:
         assert p["state"] == "tracked" and len(p["cameras"]) >= 3, p
@@ -73,7 +79,7 @@ for j in run:
         print(f"  run props: frame {j['frame']} prop {p['id']}: {d:.2f} mm, {deg:.3f} deg from truth")
         assert d <= 2.0 and deg <= 0.5, (d, deg)
 PY
-then ok "run's prop poses equal previz track's and meet the truth (<= 2 mm, 0.5 deg)"; else fail "run prop poses"; fi
+then ok "run's prop poses equal previz track's (searches pooled with the keys or not) and meet the truth (<= 2 mm, 0.5 deg)"; else fail "run prop poses"; fi
 
 # previz composite on run's depth: the same key and depth give the same composites, bit for bit.
 # previz composite keys every main frame whole, so run does too here (--key-main-whole); by
@@ -103,7 +109,7 @@ assert 0 <= j["props_full_frame_fraction"] <= 1, j
 assert j["noise_sigma"] == json.load(open(sys.argv[2]))["options"]["noise_sigma"], j
 assert j["latency_ms"] >= j["ms"] * 0.999, j
 assert 0 < j["ms_mean"] <= j["ms_max"] and j["ms"] <= j["ms_p95"] <= j["ms_max"], j
-assert j["key_region_margin_px"] == 48 and j["key_main_region"] is True, j
+assert j["key_region_margin_px"] == 48 and j["key_main_region"] is True and j["props_pooled_with_key"] is True, j
 # The frames' quality against the take's truth stays where it is (measured on this take: witness
 # IoU min 0.963, median 0.985; depth within 0.05 mm of the exact hull at p95, 2 of 3778 pixels
 # with depth in one only; composite PSNR over the actor 30.3 dB).
@@ -117,9 +123,9 @@ assert all(r["ms"] > 0 and r["cpu_ms"] > 0 and r["fps"] > 0 and r["speedup"] > 0
 assert j["scaling"][0]["speedup"] == 1, j
 PY
 then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
-"$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 --key-main-whole 2>/dev/null |
-  python3 -c 'import json, sys; j = json.loads(sys.stdin.read()); assert j["key_main_region"] is False, j' \
-  && ok "bench run --key-main-whole" || fail "bench run --key-main-whole"
+"$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 --key-main-whole --props-own-pool 2>/dev/null |
+  python3 -c 'import json, sys; j = json.loads(sys.stdin.read()); assert j["key_main_region"] is False and j["props_pooled_with_key"] is False, j' \
+  && ok "bench run --key-main-whole --props-own-pool" || fail "bench run --key-main-whole --props-own-pool"
 
 # Failures that name the culprit.
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet

@@ -92,12 +92,32 @@ TEST(FrameLoop, InsertedStageRunsInItsPlaceAndIsTimed) {
   });
   EXPECT_EQ(loop.stages(), (std::vector<std::string>{"key", "carve", "depth", "probe", "composite"}));
   EXPECT_THROW(loop.insertStage("nosuch", "x", [](live::FrameState&) {}), Error);
+  // Work of the probe stage pooled with the keys: the items planned (pixels > 0) run once each,
+  // before the stages after "key", and their share of the pool's time is the probe's.
+  std::vector<int> runs(3, 0);
+  cv::Mat work(1000, 1000, CV_32F, cv::Scalar(1)), blurred;
+  loop.poolWithKey({"probe", [](live::FrameState&) { return std::vector<long long>{100, 0, 100}; },
+                    [&](int i) {
+                      ++runs[static_cast<size_t>(i)];
+                      cv::Mat b;
+                      cv::GaussianBlur(work, b, cv::Size(31, 31), 0);
+                    }});
+  EXPECT_THROW(loop.poolWithKey({"nosuch", {}, {}}), Error);
+  EXPECT_THROW(loop.poolWithKey({"key", {}, {}}), Error);
+  bool items_done_before_carve = false;
+  loop.insertStage("key", "check", [&](live::FrameState&) { items_done_before_carve = runs == std::vector<int>{1, 0, 1}; });
   const live::TakeReader reader(t, loop, live::TakeInputOptions{});
   live::FrameState s;
   reader.read(1, s);
   const std::vector<live::StageTime> times = loop.run(s);
-  ASSERT_EQ(times.size(), 5u);
-  EXPECT_EQ(times[3].stage, "probe");
+  ASSERT_EQ(times.size(), 6u);
+  EXPECT_EQ(times[0].stage, "key");
+  EXPECT_EQ(times[4].stage, "probe");
+  EXPECT_TRUE(items_done_before_carve);
+  EXPECT_EQ(runs, (std::vector<int>{1, 0, 1}));
+  EXPECT_GT(times[0].ms, 0);
+  EXPECT_GT(times[4].ms, 0);
+  EXPECT_GT(times[4].cpu_ms, 0);
   EXPECT_TRUE(saw_depth);
   EXPECT_FALSE(saw_composite);
   EXPECT_FALSE(s.composite.bgr.empty());

@@ -92,7 +92,7 @@ class PropTracker {
   // the three steps with the searches over OpenMP, and gives the same frame.
   //   begin(): checks the images and plans each camera's search (its whole frame or the predicted
   //     regions); returns the pixels each camera will search (0: nothing, e.g. no image);
-  //   search(c): camera c's search, from any thread, each camera once; the images must outlive it;
+  //   search(c): camera c's search, from any thread, each camera once (the images must live until finish());
   //   finish(): the same-frame whole-frame search of a prop its regions missed, the solve and the
   //     filter. TrackFrame::detect_ms is then the cameras' search times summed (track(): the
   //     searches' wall time).

@@ -28,6 +28,7 @@
 #include "carving/hull.h"
 #include "carving/keyer.h"
 #include "carving/refine.h"
+#include "core/cpu_time.h"
 #include "core/lens_model.h"
 #include "core/names.h"
 #include "core/pose.h"
@@ -52,15 +53,10 @@ double nowMs() {
 // CPU time of the whole process (every thread): on a shared machine wall time measures the
 // other jobs as much as this code; CPU time / threads is what an idle 2-core machine would take
 // if the stage scaled perfectly.
-double cpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
 struct Stopwatch {
-  double wall = nowMs(), cpu = cpuMs();
+  double wall = nowMs(), cpu = previz::processCpuMs();
   double wallMs() const { return nowMs() - wall; }
-  double cpuMsSince() const { return cpuMs() - cpu; }
+  double cpuMsSince() const { return previz::processCpuMs() - cpu; }
 };
 
 struct Frame {

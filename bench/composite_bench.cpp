@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "composite/compositor.h"
+#include "core/cpu_time.h"
 #include "core/distortion_maps.h"
 #include "datasets/rigs.h"
 
@@ -29,11 +30,6 @@ using namespace previz::composite;
 
 double nowMs() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double cpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
 struct Inputs {
@@ -82,11 +78,11 @@ void composite(benchmark::State& state) {
   compositor.composite(i.in, r);  // warm the tables and the output image
   std::vector<double> wall, cpu;
   for (auto _ : state) {
-    const double w0 = nowMs(), c0 = cpuMs();
+    const double w0 = nowMs(), c0 = previz::processCpuMs();
     compositor.composite(i.in, r);
     benchmark::DoNotOptimize(r.bgr.data);
     wall.push_back(nowMs() - w0);
-    cpu.push_back(cpuMs() - c0);
+    cpu.push_back(previz::processCpuMs() - c0);
   }
   std::sort(wall.begin(), wall.end());
   std::sort(cpu.begin(), cpu.end());

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "core/cpu_time.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
 #include "datasets/render.h"
@@ -92,13 +93,9 @@ BENCHMARK(BM_RenderWitness720p)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK(BM_RenderMain1080p)->Unit(benchmark::kMillisecond)->Iterations(2);
 BENCHMARK(BM_RenderStudioFrame)->Unit(benchmark::kMillisecond)->Iterations(1);
 
-// CPU time of the calling thread: with threads = 1 every render runs on it, so the figure holds
-// on a machine shared with other work (wall time is printed too).
-double threadCpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
+// CPU time of the calling thread (core/cpu_time.h): with threads = 1 every render runs on it, so
+// the figure holds on a machine shared with other work (wall time is printed too).
+using previz::threadCpuMs;
 
 struct RigCaptureCase {
   std::string board;

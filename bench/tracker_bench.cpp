@@ -20,6 +20,8 @@
 #include <thread>
 #include <vector>
 
+#include "core/cpu_time.h"
+
 #include "live/tracker.h"
 
 namespace {
@@ -62,11 +64,7 @@ std::vector<std::uint8_t> packet(int kind, int i) {
   return tr::encodeOtrk(tr::encodeOtrkPayload(tr::openTrackIoCameraSample(f, poseAt(i)), e), e, i & 0xFFFF);
 }
 
-double threadCpuMs() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
+using previz::threadCpuMs;
 
 double quantile(std::vector<double> v, double q) {
   if (v.empty()) return 0;

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "core/cpu_time.h"
 #include "core/threads.h"
 #include "core/units.h"
 #include "tests/tracking/filter_motion.h"
@@ -49,11 +50,6 @@ constexpr double kBudgetMs = 3.0;  // ARCHITECTURE.md: tag tracking <= 3 ms a fr
 
 double nowMs() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double cpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
 struct Take {
@@ -103,9 +99,9 @@ void runTracker(benchmark::State& state, const std::string& key, const std::stri
     PropTracker tracker(t.fx.rig.cameras, t.props, o);
     if (tags) tags->assign(kFrames, std::vector<std::set<int>>(t.frames[0].size()));
     for (int f = 0; f < kFrames; ++f) {
-      const double w = nowMs(), c = cpuMs();
+      const double w = nowMs(), c = previz::processCpuMs();
       const TrackFrame r = tracker.track(f, 2.0 + f / kFps, t.frames[static_cast<size_t>(f)]);
-      const double ms = nowMs() - w, cpu = cpuMs() - c;
+      const double ms = nowMs() - w, cpu = previz::processCpuMs() - c;
       benchmark::DoNotOptimize(r.props.data());
       // ROI cases: the first frame is the full-frame acquisition, not the ROI path.
       if (!(roi && f == 0)) {
@@ -150,14 +146,14 @@ void BM_Solve(benchmark::State& state) {
       if (owner) obs.push_back(makeTagObservation(t.fx.rig.cameras[c].camera, static_cast<int>(c), owner->second, d.corners_px));
     }
   for (auto _ : state) {
-    const double w = nowMs(), c = cpuMs();
+    const double w = nowMs(), c = previz::processCpuMs();
     const PoseEstimate e = solvePropPose(t.fx.rig.cameras, t.props.props[0], obs, SolveOptions{});
     benchmark::DoNotOptimize(e.T);
     Result& res = results()["4_solve"];
     res.stage = "joint_solve";
     res.size = std::to_string(obs.size()) + " tags";
     res.ms.push_back(nowMs() - w);
-    res.cpu_ms.push_back(cpuMs() - c);
+    res.cpu_ms.push_back(previz::processCpuMs() - c);
   }
 }
 
@@ -167,7 +163,7 @@ void BM_Filter(benchmark::State& state) {
   Pose T = Pose::Identity();
   int f = 0;
   for (auto _ : state) {
-    const double w = nowMs(), c = cpuMs();
+    const double w = nowMs(), c = previz::processCpuMs();
     T.translation().x() = 0.001 * f;
     benchmark::DoNotOptimize(filter.update(f / kFps, T, cov));
     ++f;
@@ -175,7 +171,7 @@ void BM_Filter(benchmark::State& state) {
     res.stage = "filter_update";
     res.size = "1 prop";
     res.ms.push_back(nowMs() - w);
-    res.cpu_ms.push_back(cpuMs() - c);
+    res.cpu_ms.push_back(previz::processCpuMs() - c);
   }
 }
 
@@ -194,9 +190,9 @@ void BM_FilterFollow(benchmark::State& state) {
     char extra[512];
     if (turn) {
       res.size = std::to_string(runs) + " runs x " + std::to_string(motion.truth.size()) + " frames";
-      double w = nowMs(), c = cpuMs();
+      double w = nowMs(), c = previz::processCpuMs();
       test::runFilter(motion, options, sr, sp, runs, kSeed, [&](int, int, const Pose&, const Pose&, const Pose&) {
-        const double w1 = nowMs(), c1 = cpuMs();
+        const double w1 = nowMs(), c1 = previz::processCpuMs();
         res.ms.push_back(w1 - w);
         res.cpu_ms.push_back(c1 - c);
         w = w1;
@@ -212,10 +208,10 @@ void BM_FilterFollow(benchmark::State& state) {
                     kSigmaDeg * f.median_rotation, kSigmaMm * f.max_position, kSigmaDeg * f.max_rotation);
     } else {
       res.size = std::to_string(runs) + " runs x 110 frames";
-      const double w = nowMs(), c = cpuMs();
+      const double w = nowMs(), c = previz::processCpuMs();
       const test::Spread j = test::stillJitter(options, sr, sp, runs, kSeed);
       res.ms.push_back((nowMs() - w) / (runs * 110));  // mean per frame: one number per run of the case
-      res.cpu_ms.push_back((cpuMs() - c) / (runs * 110));
+      res.cpu_ms.push_back((previz::processCpuMs() - c) / (runs * 110));
       std::snprintf(extra, sizeof(extra),
                     "\"options\":\"%s\",\"sigma_mm\":%.2f,\"sigma_deg\":%.3f,\"jitter_mm\":%.4f,\"jitter_deg\":%.5f",
                     legacy ? "legacy" : "default", kSigmaMm, kSigmaDeg, 1e3 * j.position_m, degrees(j.rotation_rad));

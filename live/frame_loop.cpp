@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/cpu_time.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/names.h"
@@ -21,14 +22,6 @@
 
 namespace previz::live {
 namespace {
-
-double cpuMs(clockid_t clock) {
-  timespec t{};
-  clock_gettime(clock, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-double processCpuMs() { return cpuMs(CLOCK_PROCESS_CPUTIME_ID); }
-double threadCpuMs() { return cpuMs(CLOCK_THREAD_CPUTIME_ID); }
 
 Error frameError(const std::string& stage, int frame, const std::exception& e) {
   ErrorContext c;

@@ -15,6 +15,7 @@
 
 #include "carving/take.h"
 #include "composite/output.h"
+#include "core/cpu_time.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/names.h"
@@ -33,13 +34,6 @@ namespace {
 constexpr int kLateFrames = 2;  // camera_late: the witness shows the frame this many before
 
 // q-quantile by rank (q = 0.5: the upper median, as bench run reports it; 0.99: p99).
-// CPU time of the process (every thread), ms.
-double cpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
-
 // Resident set size of this process, MiB (/proc/self/statm: pages).
 double rssMiB() {
   std::ifstream in("/proc/self/statm");
@@ -429,7 +423,7 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
       }
       disk_full = faultAt(r.faults, "disk_full", n) != nullptr;
       const Stopwatch t0;
-      const double c0 = cpuMs();
+      const double c0 = processCpuMs();
       try {
         reader.read(t, s);
       } catch (const Error& e) {
@@ -437,10 +431,10 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
         fail_reason[n] = e.what();
       }
       ms += t0.ms();
-      cpu_ms += cpuMs() - c0;
+      cpu_ms += processCpuMs() - c0;
     }
     const Stopwatch t1;
-    const double c1 = cpuMs();
+    const double c1 = processCpuMs();
     if (!failed) {
       // A plate stamped with another frame than the frame set's (a camera out of sync) is not
       // carved with the others.
@@ -491,7 +485,7 @@ SoakReport runSoak(const SoakOptions& o, const std::function<void(const SoakProg
       for (const SoakEvent& e : skips[n]) r.skipped_writes.push_back(e);
     }
     ms += t1.ms();
-    cpu_ms += cpuMs() - c1;
+    cpu_ms += processCpuMs() - c1;
     SoakFrame log;
     log.frame = n;
     log.take_frame = t;

@@ -37,6 +37,7 @@
 #include "core/leftovers.h"
 #include "core/mesh.h"
 #include "core/pose.h"
+#include "core/simd.h"
 #include "core/stats.h"
 #include "datasets/scene.h"
 #include "datasets/synth.h"
@@ -704,6 +705,7 @@ int runBench(const BenchArgs& a) {
                       {"key_region_margin_px", a.loop.key_region_margin_px},
                       {"key_main_region", a.loop.key_region_margin_px > 0 && !a.loop.key_main_whole},
                       {"props_pooled_with_key", l.props != nullptr && !a.loop.props_own_pool},
+                      {"simd", wideVersion()},
                       // Frames are not overlapped: a frame's composite is out when its stages are done.
                       {"latency_ms", t},
                       // The spread the median hides: a frame that keys a witness whole or searches a

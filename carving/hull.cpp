@@ -34,6 +34,7 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/simd.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
 
@@ -200,6 +201,7 @@ CameraModel makeCameraModel(const RigCamera& rig_camera) {
   return m;
 }
 
+PREVIZ_WIDE
 FrameCam makeFrameCam(const cv::Mat& mask) {
   FrameCam f;
   f.used = true;
@@ -319,9 +321,11 @@ struct CarveContext {
   int set_words = 1;  // words per camera set (detail/hull_data.h)
 };
 
-// Footprint state of one child in one camera from its projected corners.
-CamState childState(const CameraModel& cam, const FrameCam& frame, const LatticePoint* pts,
-                    const std::array<std::uint8_t, 8>& corners) {
+// Footprint state of one child in one camera from its projected corners. Inlined by force: in
+// latticeStates' PREVIZ_WIDE versions GCC no longer inlined it on its own.
+[[gnu::always_inline]] inline CamState childState(const CameraModel& cam, const FrameCam& frame,
+                                                  const LatticePoint* pts,
+                                                  const std::array<std::uint8_t, 8>& corners) {
   double umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf;
   double xmin = kInf, xmax = -kInf, ymin = kInf, ymax = -kInf;
   bool any_invalid = false, all_behind = true;
@@ -401,6 +405,7 @@ constexpr double kAffineMaxPadPx = 0.5;
 
 // Children states in one camera from their projected corners (the 3x3x3 lattice, each point
 // projected once) and the distortion pad of each child's footprint.
+PREVIZ_WIDE
 void latticeStates(const CameraModel& cam, const FrameCam& frame, const double* corner0,
                    double edge, const bool* alive, CamState* states) {
   const ChildLattice& lattice = childLattice();
@@ -439,6 +444,7 @@ void latticeStates(const CameraModel& cam, const FrameCam& frame, const double* 
 // them into dropped / inside / mixed (see the file comment). out.child_sets holds 8 sets.
 // kWords: words per camera set, 0 = ctx.set_words (see carveLevels).
 template <int kWords>
+PREVIZ_WIDE
 void splitParent(const Cell& parent, const std::uint64_t* parent_set, int level,
                  const CarveContext& ctx, BlockOut& out) {
   const Grid& g = ctx.grid;
@@ -650,6 +656,7 @@ void carveLevels(const CarveContext& ctx, const std::vector<std::uint64_t>& used
 
 // Fills h's brick lookup (detail/hull_data.h) from the kept cells and the surface cells' mixed
 // sets.
+PREVIZ_WIDE
 void buildBricks(HullData& h, const std::vector<Cell>& inside, const std::vector<Cell>& surface,
                  const std::vector<std::uint64_t>& surface_sets, int threads) {
   if (inside.empty() && surface.empty()) return;

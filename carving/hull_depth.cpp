@@ -15,6 +15,7 @@
 #include "carving/detail/hull_camera.h"
 #include "carving/detail/hull_data.h"
 #include "core/error.h"
+#include "core/simd.h"
 #include "core/threads.h"
 
 namespace previz::carving {
@@ -197,7 +198,8 @@ struct RayQuery {
 
   // The hull's first point in a surface voxel's segment [ta, tb] (ta known outside): samples
   // at step_t, then bisection between the last outside and the first inside sample.
-  bool searchVoxel(std::int64_t surface_index, double ta, double tb, double* hit) const {
+  [[gnu::always_inline]] bool searchVoxel(std::int64_t surface_index, double ta, double tb,
+                                          double* hit) const {
     const detail::SurfaceInfo& info = h->surface_info[surface_index];
     const std::uint64_t* mixed = h->surfaceMixed(surface_index);
     const int n = std::max(1, static_cast<int>(std::ceil((tb - ta) / step_t)));
@@ -221,8 +223,8 @@ struct RayQuery {
   }
 
   // Walks the voxels of a mixed brick over [ta, tb].
-  bool searchBrick(const detail::Brick& brick, const int* brick_cell, double ta, double tb,
-                   double* hit) const {
+  [[gnu::always_inline]] bool searchBrick(const detail::Brick& brick, const int* brick_cell,
+                                          double ta, double tb, double* hit) const {
     int lo[3], hi[3];
     for (int a = 0; a < 3; ++a) {
       lo[a] = (brick_cell[a] + h->brick_min[a]) << detail::kBrickShift;
@@ -252,7 +254,10 @@ struct RayQuery {
   }
 
   // Depth (t) of the first hull point along the ray at or beyond t_start; +inf when it misses.
-  double run(double t_start) const {
+  // run, searchBrick and searchVoxel are inlined by force into traceRays (one call site each):
+  // in traceRays' PREVIZ_WIDE versions GCC no longer inlined them on its own, and the AVX2
+  // version called the baseline code.
+  [[gnu::always_inline]] double run(double t_start) const {
     double t0 = t_start, t1 = kInf;
     int lo[3] = {0, 0, 0}, hi[3];
     double bo[3], bd[3];
@@ -360,6 +365,7 @@ bool depthLowerBound(const HullData& h, const CameraModel& cam, cv::Mat& bound) 
 // read at run time the 8-camera depth took 4-6 % longer. Larger rigs run with kWords = 0.
 // bound: depthLowerBound's (nullptr: none).
 template <int kWords>
+PREVIZ_WIDE
 void traceRays(const HullData& h, const Camera& cam, const RayTable& table,
                const Eigen::Matrix3d& R, const Eigen::Vector3d& centre, const double* qo,
                const cv::Mat& silhouette, const cv::Mat* bound, int threads, cv::Mat& out) {

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/simd.h"
 #include "core/srgb.h"
 #include "core/threads.h"
 
@@ -380,6 +381,7 @@ std::vector<cv::Rect> growAndMerge(const std::vector<cv::Rect>& boxes, int margi
 // Screen test of one row, 16 pixels per step: kScreen where the chroma and the green's range say
 // screen, kUnknown elsewhere (decided by the scalar pass). range: per-pixel (min, max) green
 // (plate) or null (min = tables.min_green8, no max).
+PREVIZ_WIDE
 void screenRow(const std::uint8_t* px, const std::uint8_t* range, const ClassifyTables& t, int W,
                std::uint8_t* c) {
   int x = 0;
@@ -418,6 +420,7 @@ void screenRow(const std::uint8_t* px, const std::uint8_t* range, const Classify
 
 // First pass over rows [y0, y1): pixel classes. Garbage-like pixels remembered from earlier
 // frames are garbage at once; those touching the remembered zone seed the flood.
+PREVIZ_WIDE
 void classifyRows(const cv::Mat& bgr8, const ClassifyParams& p, int y0, int y1, cv::Mat& cls,
                   std::vector<cv::Point>& seeds) {
   const auto& lut = srgb8ToLinear();
@@ -783,6 +786,7 @@ struct Candidates {
 // the purest of those (at least kPureReach of the farthest one's distance from B). Returns -1
 // when the window has no background (interior: alpha 1) and -2 when it has no foreground to mix
 // with (alpha 0).
+PREVIZ_WIDE
 float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, bool use_plate,
                 int x, int y, int radius) {
   const auto& lut = srgb8ToLinear();
@@ -962,6 +966,7 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
 // transition (unknown, or a 4-neighbour of another kind: background / unknown / foreground),
 // memory |= garbage.
 // Returns the row's garbage pixel count.
+PREVIZ_WIDE
 int markTransitions(const std::uint8_t* c, const std::uint8_t* up, const std::uint8_t* down, int W,
                     std::uint8_t* a, std::uint8_t* s, std::uint8_t* need, std::uint8_t* mem) {
   auto kind = [&](const std::uint8_t* row, int x) {
@@ -1019,6 +1024,7 @@ int findRoot(std::vector<int>& parent, int i) {
   return i;
 }
 
+PREVIZ_WIDE
 void cleanSilhouette(cv::Mat& sil, cv::Mat& alpha8, const KeyerOptions& o, KeyStats& stats,
                      std::vector<cv::Rect>* parts) {
   if (o.min_blob_px <= 1 && o.min_hole_px <= 1 && parts == nullptr) return;
@@ -1385,6 +1391,7 @@ void Keyer::key(const cv::Mat& frame, const std::string& source, KeyResult& resu
 
 void Keyer::resetRegion() { regions_.clear(); }
 
+PREVIZ_WIDE
 bool Keyer::foregroundOutside(const Frame& f, const std::vector<cv::Rect>& regions) {
   // Every kRegionProbeRows-th row classified whole (the first pass alone, no flood, so
   // garbage-like pixels do not count): a run of clear foreground outside the regions is
@@ -1433,6 +1440,7 @@ bool Keyer::reachesEdge(const cv::Mat& silhouette, const cv::Rect& region) {
   return false;
 }
 
+PREVIZ_WIDE
 void Keyer::keyRegion(const Frame& f, const cv::Rect& r, KeyResult& result, std::vector<cv::Rect>* parts) {
   // The region as images of its own (views: no copy): the frame, the screen model's per-pixel
   // images, the garbage memory and the scratch. Every pass below reads rows of these views, so
@@ -1585,6 +1593,7 @@ cv::Mat despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& s
   return out;
 }
 
+PREVIZ_WIDE
 void despill(const cv::Mat& frame, const KeyResult& key, const ScreenModel& screen, const KeyerOptions& options,
              cv::Mat& out) {
   checkImage(frame, "despill");

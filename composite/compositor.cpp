@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/simd.h"
 #include "core/srgb.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
@@ -170,6 +171,7 @@ CompositeResult Compositor::composite(const CompositeInputs& in, bool debug_laye
   return r;
 }
 
+PREVIZ_WIDE
 void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool debug_layers,
                            const std::string& source) const {
   const Stopwatch start;

@@ -17,6 +17,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   slurm-wlm munge chromium   # batch tests: a loopback Slurm cluster, the summary page in Chromium
   python3 python3-jsonschema   # OpenTrackIO tests: payloads checked against the SMPTE schema
+  qemu-user   # tests/live/wide_test.sh: the hot loops' baseline versions run on an emulated CPU without AVX
   clang libclang-rt-14-dev libomp-dev   # scripts/fuzz.sh: clang with libFuzzer and the sanitizers (a Recommends of clang, not installed by --no-install-recommends), OpenMP for clang
 )
 

@@ -112,6 +112,8 @@ assert 0 < j["ms_mean"] <= j["ms_max"] and j["ms"] <= j["ms_p95"] <= j["ms_max"]
 assert j["key_region_margin_px"] == 48 and j["key_main_region"] is True and j["props_pooled_with_key"] is True, j
 # The hot loops' version (core/simd.h): AVX2 exactly when this CPU has it, unless built without.
 cpu_avx2 = " avx2" in open("/proc/cpuinfo").read()
+# The floor the frame is measured against: a plain binary key of the same plates, far less work.
+assert j["binary_key_floor_ms"] > 0 and j["frame_over_floor"] > 1, j
 assert j["simd"] in ("avx2", "baseline", "off") and (j["simd"] == "avx2") == (cpu_avx2 and j["simd"] != "off"), j
 # The frames' quality against the take's truth stays where it is (measured on this take: witness
 # IoU min 0.963, median 0.985; depth within 0.05 mm of the exact hull at p95, 2 of 3778 pixels

@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "core/marker_edges.h"
 #include "core/srgb.h"
+#include "tracking/detail/apriltag_blur.h"
 #include "tracking/detail/families.h"
 #include "tracking/props.h"
 
@@ -479,8 +480,16 @@ struct TagDetector::Impl {
       else
         image.copyTo(search);
     }
+    // libapriltag's blur at decimate 1 done here, the same bits (detail/apriltag_blur.h); it is
+    // then told not to blur. Where this does not apply, libapriltag blurs as before.
+    apriltag_detector_t* const detector = second ? td_plain : td;
+    const float quad_sigma = detector->quad_sigma;
+    if (!second && !options.library_blur && detector->quad_decimate == 1.0f &&
+        detail::apriltagBlur(search, quad_sigma))
+      detector->quad_sigma = 0;
     image_u8_t im{search.cols, search.rows, static_cast<int32_t>(search.step[0]), search.ptr<uint8_t>()};
-    Detections dets(apriltag_detector_detect(second ? td_plain : td, &im));
+    Detections dets(apriltag_detector_detect(detector, &im));
+    detector->quad_sigma = quad_sigma;
     for (int k = 0; k < zarray_size(dets.get()); ++k) {
       apriltag_detection_t* det = nullptr;
       zarray_get(dets.get(), k, &det);

@@ -28,6 +28,10 @@ struct DetectorOptions {
   // 2 grey levels a channel) that is 0.8 as before; on clean footage, JPEG photos and a good
   // camera's frames 0, which finds the small tags the blur loses.
   bool auto_sigma = true;
+  // The blur at decimate 1 computed by previz with libapriltag's own integers, 8-16 pixels at a
+  // time (tracking/detail/apriltag_blur.h), libapriltag then handed quad_sigma 0: the same
+  // detections. true = libapriltag blurs (its scalar code; to compare).
+  bool library_blur = false;
   int threads = 1;             // libapriltag worker threads per call (the tracker runs cameras in parallel)
   bool refine_edges = true;    // fit each edge to the image gradient (sub-pixel corners)
   double decode_sharpening = 0.25;

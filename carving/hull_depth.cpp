@@ -98,7 +98,7 @@ struct RayQuery {
     std::fill_n(qd_valid.data(), words(), std::uint64_t{0});
   }
   // Camera c's verdict on the ray's point at t (c's ray direction computed on first use).
-  CamState stateAt(int c, double t) const {
+  [[gnu::always_inline]] CamState stateAt(int c, double t) const {
     const int w = c / detail::kCamerasPerWord, bit = c % detail::kCamerasPerWord;
     const CameraModel& cam = (*h->cameras)[c];
     double* qdc = qd.data() + 3 * c;
@@ -122,11 +122,12 @@ struct RayQuery {
 
   // The k-of-n rule at o + t d, as HullData::insideGiven, with the camera coordinates
   // interpolated along the ray.
-  bool insideAt(double t, const detail::SurfaceInfo& info, const std::uint64_t* mixed) const {
+  [[gnu::always_inline]] bool insideAt(double t, const detail::SurfaceInfo& info,
+                                       const std::uint64_t* mixed) const {
     int n_out = info.n_out, views = info.n_out + info.n_in;
     if (n_out > h->k) return false;
     // Counts camera c's verdict; false once the point is out of more than k cameras.
-    const auto count = [&](int c) {
+    const auto count = [&](int c) __attribute__((always_inline)) {
       const CamState s = stateAt(c, t);
       if (s == detail::kOut) {
         ++views;
@@ -160,7 +161,8 @@ struct RayQuery {
   // of the way (the image of a sub-voxel segment is straight to far below a pixel); the hull
   // starts where the last camera lets it in. False (bisect instead) when some camera's image
   // jumps diagonally or by more than a pixel, leaves the image, or k > 0.
-  bool crossing(const std::uint64_t* mixed, double t_out, double t_in, double* hit) const {
+  [[gnu::always_inline]] bool crossing(const std::uint64_t* mixed, double t_out, double t_in,
+                                       double* hit) const {
     if (h->k != 0) return false;
     double t_hit = t_out;
     for (int w = 0; w < words(); ++w) {
@@ -254,7 +256,8 @@ struct RayQuery {
   }
 
   // Depth (t) of the first hull point along the ray at or beyond t_start; +inf when it misses.
-  // run, searchBrick and searchVoxel are inlined by force into traceRays (one call site each):
+  // run, searchBrick, searchVoxel, insideAt (and its lambda), stateAt and crossing are inlined
+  // by force into traceRays:
   // in traceRays' PREVIZ_WIDE versions GCC no longer inlined them on its own, and the AVX2
   // version called the baseline code.
   [[gnu::always_inline]] double run(double t_start) const {

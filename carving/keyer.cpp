@@ -497,6 +497,7 @@ void classifyRows(const cv::Mat& bgr8, const ClassifyParams& p, int y0, int y1, 
 // tell: the surroundings showing through a gap enclosed by the actor (between the raised arm and
 // the head) are reached in frames where the actor stands elsewhere.
 // Scan-line flood fill: work proportional to the pixels it turns, one stack of row spans.
+PREVIZ_WIDE
 void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
   const int W = cls.cols, H = cls.rows;
   auto seed = [&](int x, int y) {
@@ -541,6 +542,7 @@ void floodGarbage(cv::Mat& cls, std::vector<cv::Point>& stack) {
 // (garbage when the window holds garbage, else screen), so that neither they nor their
 // neighbours are refined. Read-only on the classes (bands run in parallel); the caller applies
 // 'out' afterwards.
+PREVIZ_WIDE
 void findLoneUnknown(const cv::Mat& cls, int y0, int y1, std::vector<detail::LonePixel>& out) {
   const int W = cls.cols, H = cls.rows;
   out.clear();
@@ -721,6 +723,7 @@ void differenceRows(const cv::Mat& bgr8, const cv::Mat& plate, const DifferenceF
 // dark grey wall: 9 levels off in blue, within one pixel's noise) is off the same way at every
 // pixel. residual: differenceRows' (read only, so bands may run in parallel). Candidates that
 // fail become kUnknown (the two-colour alpha decides them). Returns the shadows kept.
+PREVIZ_WIDE
 int shadowNeighbourhood(const cv::Mat& residual, const DifferenceFrame& d, int y0, int y1, cv::Mat& cls) {
   int shadows = 0;
   const float sigma = std::sqrt(d.sigma_frame * d.sigma_frame + d.sigma_plate * d.sigma_plate);

@@ -257,9 +257,8 @@ struct RayQuery {
 
   // Depth (t) of the first hull point along the ray at or beyond t_start; +inf when it misses.
   // run, searchBrick, searchVoxel, insideAt (and its lambda), stateAt and crossing are inlined
-  // by force into traceRays:
-  // in traceRays' PREVIZ_WIDE versions GCC no longer inlined them on its own, and the AVX2
-  // version called the baseline code.
+  // by force into traceRays: in traceRays' PREVIZ_WIDE versions GCC no longer inlined them on
+  // its own, and the AVX2 version called the baseline code.
   [[gnu::always_inline]] double run(double t_start) const {
     double t0 = t_start, t1 = kInf;
     int lo[3] = {0, 0, 0}, hi[3];

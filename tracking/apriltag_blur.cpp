@@ -1,6 +1,7 @@
 // libapriltag's quad-search blur, the same integers (tracking/detail/apriltag_blur.h).
 #include "tracking/detail/apriltag_blur.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -25,6 +26,19 @@ std::vector<std::uint16_t> kernel(double sigma, int ksz) {
   return k;
 }
 
+// out[x] = (sum_j k[j] src[j][x]) >> 8 for x < n: one 1-D pass, its sources j along the row
+// (in + j) or down the column (row y - ksz/2 + j). Sums in 16 bits, 8-16 pixels a step.
+void weightedSum(const std::vector<std::uint16_t>& k, const std::vector<const std::uint8_t*>& src,
+                 int n, std::vector<std::uint16_t>& acc, std::uint8_t* out) {
+  for (int x = 0; x < n; ++x) acc[x] = static_cast<std::uint16_t>(k[0] * src[0][x]);
+  for (size_t j = 1; j < k.size(); ++j) {
+    const std::uint16_t kj = k[j];
+    const std::uint8_t* s = src[j];
+    for (int x = 0; x < n; ++x) acc[x] = static_cast<std::uint16_t>(acc[x] + kj * s[x]);
+  }
+  for (int x = 0; x < n; ++x) out[x] = static_cast<std::uint8_t>(acc[x] >> 8);
+}
+
 }  // namespace
 
 int apriltagBlurSize(float quad_sigma) {
@@ -46,35 +60,25 @@ bool apriltagBlur(cv::Mat& grey, float quad_sigma) {
   // row-blurred image, each column's sum the same).
   cv::Mat rows(H, W, CV_8UC1);
   std::vector<std::uint16_t> acc(W);
+  std::vector<const std::uint8_t*> src(ksz);
   const int n = W - ksz;  // positions blurred in a row
   for (int y = 0; y < H; ++y) {
     const std::uint8_t* in = grey.ptr<std::uint8_t>(y);
     std::uint8_t* out = rows.ptr<std::uint8_t>(y);
-    for (int x = 0; x < n; ++x) acc[x] = static_cast<std::uint16_t>(k[0] * in[x]);
-    for (int j = 1; j < ksz; ++j) {
-      const std::uint16_t kj = k[j];
-      const std::uint8_t* s = in + j;
-      for (int x = 0; x < n; ++x) acc[x] = static_cast<std::uint16_t>(acc[x] + kj * s[x]);
-    }
+    for (int j = 0; j < ksz; ++j) src[j] = in + j;
     for (int x = 0; x < h; ++x) out[x] = in[x];
-    for (int x = 0; x < n; ++x) out[h + x] = static_cast<std::uint8_t>(acc[x] >> 8);
+    weightedSum(k, src, n, acc, out + h);
     for (int x = n + h; x < W; ++x) out[x] = in[x];
   }
   for (int y = 0; y < H; ++y) {
     std::uint8_t* out = grey.ptr<std::uint8_t>(y);
     if (y < h || y >= H - ksz + h) {
       const std::uint8_t* in = rows.ptr<std::uint8_t>(y);
-      for (int x = 0; x < W; ++x) out[x] = in[x];
+      std::copy(in, in + W, out);
       continue;
     }
-    const std::uint8_t* first = rows.ptr<std::uint8_t>(y - h);
-    for (int x = 0; x < W; ++x) acc[x] = static_cast<std::uint16_t>(k[0] * first[x]);
-    for (int j = 1; j < ksz; ++j) {
-      const std::uint16_t kj = k[j];
-      const std::uint8_t* s = rows.ptr<std::uint8_t>(y - h + j);
-      for (int x = 0; x < W; ++x) acc[x] = static_cast<std::uint16_t>(acc[x] + kj * s[x]);
-    }
-    for (int x = 0; x < W; ++x) out[x] = static_cast<std::uint8_t>(acc[x] >> 8);
+    for (int j = 0; j < ksz; ++j) src[j] = rows.ptr<std::uint8_t>(y - h + j);
+    weightedSum(k, src, W, acc, out);
   }
   return true;
 }

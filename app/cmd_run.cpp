@@ -68,7 +68,8 @@ struct LoopArgs {
   std::string rig, main_poses, lens, cg_dir;
   double focus = 0, zoom = 0;
   std::string tracked_main_poses;
-  double voxel_m = kLiveVoxelM;  // frame_loop.h says why 1 cm
+  double voxel_m = std::nan("");  // NaN: kLiveVoxelM (frame_loop.h says why 2 cm), kLiveMeshVoxelM with run --meshes
+  double depth_step_m = live::kLiveDepthStepM;
   int k = 0;
   double band_m = 0.04;
   double cg_gain = 1.0;
@@ -110,7 +111,13 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--focus", a.focus, "Focus encoder value for --lens")->capture_default_str();
   cmd->add_option("--zoom", a.zoom, "Zoom encoder value for --lens")->capture_default_str();
   cmd->add_option("--cg", a.cg_dir, "CG folder with color/, depth/, camera.json (default: TAKE/cg)");
-  cmd->add_option("--voxel", a.voxel_m, "Finest carving cell, metres")->capture_default_str();
+  cmd->add_option("--voxel", a.voxel_m,
+                  "Finest carving cell, metres (default 0.02; run --meshes: 0.01); the depth is the exact hull of the "
+                  "silhouettes whatever the cell (--depth-step)");
+  cmd->add_option("--depth-step", a.depth_step_m,
+                  "Main-view depth: the step each ray samples the silhouettes at inside the hull's surface cells, "
+                  "metres (a hull sliver thinner than this can be missed; 0 = half the cell)")
+      ->capture_default_str();
   cmd->add_option("--k", a.k, "A cell survives outside the silhouette of at most k cameras")->capture_default_str();
   cmd->add_option("--depth-band", a.band_m, "Soft front/behind transition, metres")->capture_default_str();
   cmd->add_option("--cg-gain", a.cg_gain, "Linear gain on the CG colour (match the plate's exposure)")
@@ -187,7 +194,8 @@ Loaded load(const fs::path& take_dir, const LoopArgs& a, bool debug_layers) {
   const Camera cg = composite::readCgCamera(cg_dir / "camera.json");
 
   FrameLoopOptions o;
-  o.hull.voxel_m = a.voxel_m;
+  o.hull.voxel_m = std::isnan(a.voxel_m) ? live::kLiveVoxelM : a.voxel_m;
+  o.hull.depth_step_m = a.depth_step_m;
   o.hull.k = a.k;
   o.composite.depth_band_m = a.band_m;
   o.composite.cg_gain = a.cg_gain;
@@ -265,7 +273,11 @@ nlohmann::json stageJson(const std::vector<StageTime>& times) {
   return j;
 }
 
-int runRun(const RunArgs& a) {
+int runRun(const RunArgs& args) {
+  RunArgs a = args;
+  // Meshes for post: 1 cm cells unless --voxel says otherwise (the live loop's 2 cm only guides
+  // its depth rays, frame_loop.h).
+  if (a.meshes && std::isnan(a.loop.voxel_m)) a.loop.voxel_m = live::kLiveMeshVoxelM;
   if (a.out.empty()) throw Error("an output folder is required", fieldContext("--out"));
   Loaded l = load(a.take, a.loop, a.layers || a.exr);
   const carving::FrameRange range = a.frames.empty() ? carving::FrameRange{} : carving::parseFrameRange(a.frames);
@@ -747,6 +759,8 @@ int runBench(const BenchArgs& a) {
                       {"repeats", a.repeats}, {"threads", resolveThreads(a.loop.threads)},
                       {"read_png_ms", median(read_ms)}, {"take", take_dir.string()},
                       {"witness_bin", a.loop.witness_bin},
+                      {"voxel_m", l.loop->carver().options().voxel_m},
+                      {"depth_step_m", l.loop->carver().options().depth_step_m},
                       {"key_region_margin_px", a.loop.key_region_margin_px},
                       {"key_main_region", a.loop.key_region_margin_px > 0 && !a.loop.key_main_whole},
                       {"props_pooled_with_key", l.props != nullptr && !a.loop.props_own_pool},

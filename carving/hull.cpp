@@ -76,6 +76,8 @@ void HullOptions::validate() const {
   if (size.maxCoeff() / voxel_m > 65000)
     bad("voxel_m", "gives more than 65000 cells along an axis of the volume (got " +
                        num(voxel_m) + ")");
+  if (!(depth_step_m >= 0.0) || !std::isfinite(depth_step_m))
+    bad("depth_step_m", "must be a finite value >= 0 (got " + num(depth_step_m) + ")");
   if (k < 0) bad("k", "must be >= 0 (got " + std::to_string(k) + ")");
   if (min_views < 1) bad("min_views", "must be >= 1 (got " + std::to_string(min_views) + ")");
   if (threads < 0) bad("threads", "must be >= 0 (got " + std::to_string(threads) + ")");

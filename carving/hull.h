@@ -27,6 +27,10 @@ struct HullOptions {
   // Stage volume carved (world, metres).
   Eigen::AlignedBox3d volume{Eigen::Vector3d(-2.0, -2.0, 0.0), Eigen::Vector3d(2.0, 2.0, 2.5)};
   double voxel_m = 0.005;   // finest cell edge
+  // Depth (Carver::depth): the step a ray samples the silhouettes at inside a surface cell before
+  // it bisects to the crossing; a hull sliver thinner than the step can fall between two samples.
+  // 0 = half the cell (voxel_m / 2).
+  double depth_step_m = 0;
   // A cell survives if it lies outside the silhouette in at most k of the cameras that see it.
   // Cameras that do not see a cell (outside their image) never carve it.
   int k = 0;

@@ -365,13 +365,12 @@ bool depthLowerBound(const HullData& h, const CameraModel& cam, cv::Mat& bound) 
 // Every pixel's depth (rows of out), one RayQuery per thread. Rigs of up to 64 cameras (the
 // live ones) run with kWords = 1, where the camera-set loops compile away: with the word count
 // read at run time the 8-camera depth took 4-6 % longer. Larger rigs run with kWords = 0.
-// bound: depthLowerBound's (nullptr: none).
+// bound: depthLowerBound's (nullptr: none). sample_m: the sampling step inside surface cells.
 template <int kWords>
 PREVIZ_WIDE
 void traceRays(const HullData& h, const Camera& cam, const RayTable& table,
                const Eigen::Matrix3d& R, const Eigen::Vector3d& centre, const double* qo,
-               const cv::Mat& silhouette, const cv::Mat* bound, int threads, cv::Mat& out) {
-  const double sample_m = h.voxel / kSamplesPerVoxel;
+               const cv::Mat& silhouette, const cv::Mat* bound, double sample_m, int threads, cv::Mat& out) {
 #pragma omp parallel num_threads(threads)
   {
     RayQuery<kWords> q(h, qo);
@@ -459,12 +458,14 @@ void Carver::depth(const VisualHull& hull, const RigCamera& camera, const cv::Ma
   std::vector<double> qo(3 * h.cameras->size());
   for (size_t c = 0; c < h.cameras->size(); ++c)
     (*h.cameras)[c].toCamera(centre.data(), qo.data() + 3 * c);
+  const double step = impl_->options.depth_step_m;
+  const double sample_m = step > 0 ? step : h.voxel / kSamplesPerVoxel;
   if (h.set_words == 1)
     traceRays<1>(h, cam, *table, R, centre, qo.data(), silhouette, bounded ? &bound : nullptr,
-                 threads, out);
+                 sample_m, threads, out);
   else
     traceRays<0>(h, cam, *table, R, centre, qo.data(), silhouette, bounded ? &bound : nullptr,
-                 threads, out);
+                 sample_m, threads, out);
 }
 
 }  // namespace previz::carving

@@ -43,17 +43,23 @@
 
 namespace previz::live {
 
-// The live loop carves at 1 cm, not the library's 5 mm. Its only use of the hull is the main
-// camera's depth, and each ray finds the exact hull of the silhouettes below the cell size
-// whatever that is (t = 4 s, main at 960x540: 99 % of pixels within 0.07 mm of the exact hull at
-// 1 cm, 0.02 mm at 5 mm; asserted in tests/carving/depth_test.cpp), while the carve is 3x faster
-// (bench_carving, 2 threads: 25 -> 8 ms). What 1 cm loses is hull slivers under ~5 mm thick,
-// which only ever stand in front of the actor. Meshes for post come from previz carve at 5 mm
-// (or run --voxel 0.005 --meshes).
-constexpr double kLiveVoxelM = 0.01;
+// The live loop carves at 2 cm, not the library's 5 mm, and its depth rays sample the
+// silhouettes every 2.5 mm. Its only use of the hull is the main camera's depth: the carve only
+// guides the rays (a carve keeps every cell some hull point may lie in), and each ray finds the
+// exact hull of the silhouettes below the cell size whatever that is. Which thin hull slivers a
+// ray can step over is set by its sampling step, not by the cell (the library's step is half a
+// cell). t = 4 s, main at 960x540 (tests/carving/depth_test.cpp): p99 0.03 mm from the exact
+// hull at 2 cm / 2.5 mm, 0.07 mm at 1 cm / 5 mm (the previous live setting), 0.02 mm at 5 mm.
+// The 24 fps bench take (bench run, 2 threads, 40 frames alternated): carve 2.5x cheaper, depth
+// 1.2x dearer; depth against the exact hull 223 -> 154 pixels off, p95 0.030 -> 0.021 mm.
+// Meshes for post come from previz carve at 5 mm, or previz run --meshes (1 cm unless --voxel).
+constexpr double kLiveVoxelM = 0.02;
+constexpr double kLiveDepthStepM = 0.0025;
+constexpr double kLiveMeshVoxelM = 0.01;  // previz run --meshes without --voxel
 inline carving::HullOptions liveHullOptions() {
   carving::HullOptions o;
   o.voxel_m = kLiveVoxelM;
+  o.depth_step_m = kLiveDepthStepM;
   return o;
 }
 

@@ -12,6 +12,7 @@
 
 #include "carving/hull.h"
 #include "core/camera_io.h"
+#include "core/error.h"
 #include "hull_fixture.h"
 
 namespace previz::carving {
@@ -218,6 +219,39 @@ TEST(HullDepth, OneCentimetreCellsStillGiveTheExactHullDepth) {
                 0.002)
         << "d = " << d;
   }
+}
+
+// The live loop carves at 2 cm and samples the rays every 2.5 mm (live/frame_loop.h
+// liveHullOptions): the carve only guides the rays, which find the exact hull of the masks below
+// the cell size; the step, not the cell, decides which thin slivers a ray can miss.
+TEST(HullDepth, TwoCentimetreCellsWithFineRaySamplesGiveTheExactHullDepth) {
+  const StudioFrame& f = frame();
+  HullOptions o = hullOptions();
+  o.voxel_m = 0.02;
+  o.depth_step_m = 0.0025;
+  Carver carver(f.witnesses, o);
+  Silhouettes s;
+  s.masks = f.masks;
+  const cv::Mat depth = carver.depth(carver.carve(s), f.main, f.main_raster.mask);
+  const DepthErrors e = compareDepth(depth, fullReferenceDepth(), f.main_raster.mask);
+  printErrors("2 cm cells, 2.5 mm ray samples: depth vs exact hull", e);
+  EXPECT_EQ(e.only_ours + e.only_ref, 0);
+  EXPECT_LE(e.p(0.99), 0.0005);
+  const cv::Mat& truth = f.main_raster.depth;
+  for (const double d : {0.05, 0.10, 0.20}) {
+    EXPECT_NEAR(orderedFraction(depth, truth, d, true), orderedFraction(fullReferenceDepth(), truth, d, true),
+                0.003)
+        << "d = " << d;
+    EXPECT_NEAR(orderedFraction(depth, truth, d, false), orderedFraction(fullReferenceDepth(), truth, d, false),
+                0.002)
+        << "d = " << d;
+  }
+}
+
+TEST(HullDepth, RejectsANegativeRayStep) {
+  HullOptions o;
+  o.depth_step_m = -0.001;
+  EXPECT_THROW(o.validate(), previz::Error);
 }
 
 // Item 3: one witness dropped (no frame), one with a corrupt silhouette (the half of the actor

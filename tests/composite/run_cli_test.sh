@@ -110,6 +110,7 @@ assert j["noise_sigma"] == json.load(open(sys.argv[2]))["options"]["noise_sigma"
 assert j["latency_ms"] >= j["ms"] * 0.999, j
 assert 0 < j["ms_mean"] <= j["ms_max"] and j["ms"] <= j["ms_p95"] <= j["ms_max"], j
 assert j["key_region_margin_px"] == 48 and j["key_main_region"] is True and j["props_pooled_with_key"] is True, j
+assert j["voxel_m"] == 0.02 and j["depth_step_m"] == 0.0025, j  # the live rays' step (live/frame_loop.h)
 # The hot loops' version (core/simd.h): AVX2 exactly when this CPU has it, unless built without.
 cpu_avx2 = " avx2" in open("/proc/cpuinfo").read()
 # The floor the frame is measured against: a plain binary key of the same plates, far less work.
@@ -128,9 +129,9 @@ assert all(r["ms"] > 0 and r["cpu_ms"] > 0 and r["fps"] > 0 and r["speedup"] > 0
 assert j["scaling"][0]["speedup"] == 1, j
 PY
 then ok "bench run JSON"; else fail "bench run: $(cat "$tmp/bench.err")"; fi
-"$bin" bench run --take "$take" --frames 2 --repeats 1 --voxel 0.02 --key-main-whole --props-own-pool 2>/dev/null |
-  python3 -c 'import json, sys; j = json.loads(sys.stdin.read()); assert j["key_main_region"] is False and j["props_pooled_with_key"] is False, j' \
-  && ok "bench run --key-main-whole --props-own-pool" || fail "bench run --key-main-whole --props-own-pool"
+"$bin" bench run --take "$take" --frames 2 --repeats 1 --depth-step 0 --key-main-whole --props-own-pool 2>/dev/null |
+  python3 -c 'import json, sys; j = json.loads(sys.stdin.read()); assert j["key_main_region"] is False and j["props_pooled_with_key"] is False and j["voxel_m"] == 0.02 and j["depth_step_m"] == 0, j' \
+  && ok "bench run --key-main-whole --props-own-pool --depth-step 0" || fail "bench run --key-main-whole --props-own-pool --depth-step 0"
 
 # Failures that name the culprit.
 expect_fail "bad --frames names the flag" "--frames" "$bin" run --take "$take" --out "$tmp/o" --frames 3-1 --quiet

@@ -50,8 +50,9 @@ namespace previz::live {
 // ray can step over is set by its sampling step, not by the cell (the library's step is half a
 // cell). t = 4 s, main at 960x540 (tests/carving/depth_test.cpp): p99 0.03 mm from the exact
 // hull at 2 cm / 2.5 mm, 0.07 mm at 1 cm / 5 mm (the previous live setting), 0.02 mm at 5 mm.
-// The 24 fps bench take (bench run, 2 threads, 40 frames alternated): carve 2.5x cheaper, depth
-// 1.2x dearer; depth against the exact hull 223 -> 154 pixels off, p95 0.030 -> 0.021 mm.
+// The 24 fps bench take (bench run, 2 threads, CPU ms, medians of 6 runs alternated with 1 cm /
+// 5 mm): carve 28.8 -> 11.5, depth 20.9 -> 28.0, the frame 7 % less; depth against the exact
+// hull 223 -> 154 pixels off, p95 0.030 -> 0.021 mm.
 // Meshes for post come from previz carve at 5 mm, or previz run --meshes (1 cm unless --voxel).
 constexpr double kLiveVoxelM = 0.02;
 constexpr double kLiveDepthStepM = 0.0025;

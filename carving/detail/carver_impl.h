@@ -16,9 +16,10 @@
 
 namespace previz::carving::detail {
 
-// Along a ray inside a surface voxel: samples every voxel / kSamplesPerVoxel, then bisection
-// between the last outside and the first inside sample (the surface to 1/32 of the sampling
-// step: 0.08 mm at 5 mm cells). Mesh edges use the same bisection.
+// Along a ray inside a surface voxel: samples every voxel / kSamplesPerVoxel (or every
+// HullOptions::depth_step_m when set), then bisection between the last outside and the first
+// inside sample (the surface to 1/32 of the sampling step: 0.08 mm at 5 mm cells). Mesh edges
+// use the same bisection.
 inline constexpr int kSamplesPerVoxel = 2;
 inline constexpr int kRefineIterations = 5;
 

@@ -48,7 +48,7 @@ int apriltagBlurSize(float quad_sigma) {
   return ksz;
 }
 
-bool apriltagBlur(cv::Mat& grey, float quad_sigma) {
+bool apriltagBlur(cv::Mat& grey, float quad_sigma, ApriltagBlurScratch& scratch) {
   CV_Assert(grey.type() == CV_8UC1);
   if (!(quad_sigma > 0)) return false;
   const int ksz = apriltagBlurSize(quad_sigma);
@@ -58,9 +58,12 @@ bool apriltagBlur(cv::Mat& grey, float quad_sigma) {
   // libapriltag's 1-D pass over n values: out[i] = in[i] for i < ksz/2 and i >= n - ksz + ksz/2,
   // else (sum_j k[j] in[i - ksz/2 + j]) >> 8. Rows first, then columns (here: rows of the
   // row-blurred image, each column's sum the same).
-  cv::Mat rows(H, W, CV_8UC1);
-  std::vector<std::uint16_t> acc(W);
-  std::vector<const std::uint8_t*> src(ksz);
+  scratch.rows.resize(static_cast<size_t>(W) * H);
+  scratch.acc.resize(W);
+  scratch.src.resize(ksz);
+  cv::Mat rows(H, W, CV_8UC1, scratch.rows.data());
+  std::vector<std::uint16_t>& acc = scratch.acc;
+  std::vector<const std::uint8_t*>& src = scratch.src;
   const int n = W - ksz;  // positions blurred in a row
   for (int y = 0; y < H; ++y) {
     const std::uint8_t* in = grey.ptr<std::uint8_t>(y);

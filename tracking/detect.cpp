@@ -233,6 +233,7 @@ struct TagDetector::Impl {
   std::vector<detail::FamilyPtr> families;
   apriltag_detector_t* td = nullptr;
   cv::Mat search;  // the rectangle in grey for libapriltag, which blurs it in place
+  detail::ApriltagBlurScratch blur_scratch;  // apriltagBlur's buffers
   cv::Mat grey8;   // around one tag, grey from the caller's image (refine_corners)
   cv::Mat patch;   // the same, float, linear light
   std::vector<std::pair<size_t, TagFit>> fits;  // this call's refined tags (index into its detections)
@@ -485,7 +486,7 @@ struct TagDetector::Impl {
     apriltag_detector_t* const detector = second ? td_plain : td;
     const float quad_sigma = detector->quad_sigma;
     if (!second && !options.library_blur && detector->quad_decimate == 1.0f &&
-        detail::apriltagBlur(search, quad_sigma))
+        detail::apriltagBlur(search, quad_sigma, blur_scratch))
       detector->quad_sigma = 0;
     image_u8_t im{search.cols, search.rows, static_cast<int32_t>(search.step[0]), search.ptr<uint8_t>()};
     Detections dets(apriltag_detector_detect(detector, &im));

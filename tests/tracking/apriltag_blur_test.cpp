@@ -41,6 +41,7 @@ TEST(ApriltagBlur, KernelSizeAsLibapriltag) {
 TEST(ApriltagBlur, SameBytesAsImageU8GaussianBlur) {
   cv::RNG rng(7);
   int compared = 0;
+  detail::ApriltagBlurScratch scratch;  // one for every size, as a detector keeps it
   for (const float sigma : {0.5f, 0.8f, 1.0f, 1.3f, 1.6f, 2.0f, 3.3f}) {
     const int ksz = detail::apriltagBlurSize(sigma);
     for (const cv::Size size : {cv::Size(ksz + 1, ksz + 1), cv::Size(ksz + 1, 40), cv::Size(37, ksz + 2),
@@ -54,7 +55,7 @@ TEST(ApriltagBlur, SameBytesAsImageU8GaussianBlur) {
         std::copy(image.ptr<std::uint8_t>(y), image.ptr<std::uint8_t>(y) + size.width, ref->buf + y * ref->stride);
       image_u8_gaussian_blur(ref, static_cast<double>(sigma), ksz);
       cv::Mat ours = image.clone();
-      ASSERT_TRUE(detail::apriltagBlur(ours, sigma)) << sigma << " " << size;
+      ASSERT_TRUE(detail::apriltagBlur(ours, sigma, scratch)) << sigma << " " << size;
       int differ = 0;
       for (int y = 0; y < size.height; ++y)
         for (int x = 0; x < size.width; ++x) differ += ours.at<std::uint8_t>(y, x) != ref->buf[y * ref->stride + x];
@@ -70,12 +71,13 @@ TEST(ApriltagBlur, LeavesToLibapriltagWhatItDoesNotBlurTheSameWay) {
   cv::Mat image(20, 20, CV_8UC1, cv::Scalar(9));
   image.at<std::uint8_t>(10, 10) = 200;
   const cv::Mat before = image.clone();
-  EXPECT_FALSE(detail::apriltagBlur(image, 0.0f));   // no blur asked
-  EXPECT_FALSE(detail::apriltagBlur(image, 0.4f));   // kernel of 1
+  detail::ApriltagBlurScratch scratch;
+  EXPECT_FALSE(detail::apriltagBlur(image, 0.0f, scratch));   // no blur asked
+  EXPECT_FALSE(detail::apriltagBlur(image, 0.4f, scratch));   // kernel of 1
   cv::Mat small(5, 40, CV_8UC1, cv::Scalar(3));
-  EXPECT_FALSE(detail::apriltagBlur(small, 1.3f));   // not taller than its kernel (5)
+  EXPECT_FALSE(detail::apriltagBlur(small, 1.3f, scratch));   // not taller than its kernel (5)
   EXPECT_EQ(cv::norm(image, before, cv::NORM_INF), 0.0);
-  EXPECT_TRUE(detail::apriltagBlur(image, 0.8f));
+  EXPECT_TRUE(detail::apriltagBlur(image, 0.8f, scratch));
   EXPECT_GT(cv::norm(image, before, cv::NORM_INF), 0.0);  // the spot spread
 }
 

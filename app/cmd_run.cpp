@@ -113,7 +113,16 @@ void addLoopOptions(CLI::App* cmd, LoopArgs& a, bool rig_required) {
   cmd->add_option("--cg", a.cg_dir, "CG folder with color/, depth/, camera.json (default: TAKE/cg)");
   cmd->add_option("--voxel", a.voxel_m,
                   "Finest carving cell, metres (default 0.02; run --meshes: 0.01); the depth is the exact hull of the "
-                  "silhouettes whatever the cell (--depth-step)");
+                  "silhouettes whatever the cell (--depth-step)")
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            // NaN stands for "not given": "--voxel nan" must not become the default.
+            double v = 0;
+            return CLI::detail::lexical_cast(text, v) && std::isfinite(v) && v > 0
+                       ? std::string()
+                       : "must be a finite number of metres > 0 (got " + text + ")";
+          },
+          "METRES > 0"));
   cmd->add_option("--depth-step", a.depth_step_m,
                   "Main-view depth: the step each ray samples the silhouettes at inside the hull's surface cells, "
                   "metres (a hull sliver thinner than this can be missed; 0 = half the cell)")

@@ -19,6 +19,7 @@
 #include "core/pose.h"
 #include "core/stopwatch.h"
 #include "core/threads.h"
+#include "live/bin_light.h"
 
 namespace previz::live {
 namespace {
@@ -45,56 +46,6 @@ void FrameLoopOptions::validate() const {
     throw Error("run: witness_bin must be in [1, 8] (got " + std::to_string(witness_bin) + ")",
                 fieldContext("witness_bin"));
 }
-
-namespace {
-
-// bin x bin pixels of an 8-bit sRGB image averaged as light into dst (size: the scaled camera's,
-// Camera::scaled; a block past the image's edge repeats its last row / column). A sensor bins
-// light, not codes: the mean of the codes is darker than the mean of the light on every mixed
-// pixel of bright screen and dark costume, and the key would read them as more foreground than
-// they are (a wider silhouette, a hull nearer the camera). Light is taken as code^2 (gamma 2,
-// against sRGB's ~2.2: a half-and-half block of codes 150 and 40 gives 110, sRGB's exact mean
-// 112, the code mean 95), which keeps it to integer arithmetic that vectorises; a uniform block
-// gives its own code back exactly.
-void binLight(const cv::Mat& src, int bin, cv::Size size, cv::Mat& dst) {
-  // round(sqrt(m)) for every mean of squared codes m (<= 255^2).
-  static const std::vector<std::uint8_t> root = [] {
-    std::vector<std::uint8_t> t(65536);
-    for (int m = 0; m < 65536; ++m) t[m] = static_cast<std::uint8_t>(std::min(255L, std::lround(std::sqrt(m))));
-    return t;
-  }();
-  dst.create(size, CV_8UC3);
-  const int area = bin * bin;
-  const int n = 3 * src.cols;
-  // Plate columns past the last whole block repeat the last one; a binned size rounded down
-  // leaves plate columns no block reads, so the buffer holds whichever is longer.
-  std::vector<std::uint32_t> acc(std::max<size_t>(n, static_cast<size_t>(3) * size.width * bin));
-  for (int y = 0; y < size.height; ++y) {
-    // Squared codes summed down the block's rows (contiguous: the compiler vectorises it).
-    std::uint32_t* a = acc.data();
-    std::fill(a, a + n, 0u);
-    for (int k = 0; k < bin; ++k) {
-      const std::uint8_t* p = src.ptr<std::uint8_t>(std::min(y * bin + k, src.rows - 1));
-      for (int i = 0; i < n; ++i) a[i] += static_cast<std::uint32_t>(p[i]) * p[i];
-    }
-    for (int i = n; i < static_cast<int>(acc.size()); ++i) a[i] = a[i - 3];  // repeat the last column
-    std::uint8_t* o = dst.ptr<std::uint8_t>(y);
-    for (int x = 0; x < size.width; ++x) {
-      const std::uint32_t* q = a + 3 * bin * x;
-      std::uint32_t b = 0, g = 0, r = 0;
-      for (int j = 0; j < bin; ++j, q += 3) {
-        b += q[0];
-        g += q[1];
-        r += q[2];
-      }
-      o[3 * x] = root[(b + area / 2) / area];
-      o[3 * x + 1] = root[(g + area / 2) / area];
-      o[3 * x + 2] = root[(r + area / 2) / area];
-    }
-  }
-}
-
-}  // namespace
 
 struct FrameLoop::Impl {
   FrameLoopOptions options;

@@ -46,6 +46,23 @@ inline Float4 load4(const float* p) {
   return v;
 }
 
+// Two pixels' Float4s side by side (the AVX2 version's 256-bit registers; two SSE registers in
+// the baseline one: each lane computes what it would alone). Inlined by force: called from the
+// PREVIZ_WIDE composite, whose AVX2 version would otherwise call the baseline code and pass
+// every 32-byte vector through memory.
+// GCC warns that a 32-byte vector returned without AVX is passed in memory (-Wpsabi): these
+// helpers are always inlined, so no call passes one.
+#pragma GCC diagnostic ignored "-Wpsabi"
+typedef float Float8 __attribute__((vector_size(32)));
+typedef std::int32_t Int8 __attribute__((vector_size(32)));
+// (Joined by a shuffle: two 16-byte stores read back as one 32-byte load stall the CPU.)
+[[gnu::always_inline]] inline Float8 load4x2(const float* a, const float* b) {
+  return __builtin_shufflevector(load4(a), load4(b), 0, 1, 2, 3, 4, 5, 6, 7);
+}
+[[gnu::always_inline]] inline Float8 splat2(float a, float b) {
+  return __builtin_shufflevector(Float4{a, a, a, a}, Float4{b, b, b, b}, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+
 // Linear R, G, B (lanes 0-2) -> the 8-bit codes, written B, G, R. Clamped without branches
 // (min/max; the CG's values are random to the branch predictor), NaN to 0 (an EXR may hold NaN:
 // it used to index the table at INT_MIN).
@@ -57,6 +74,20 @@ inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
   bgr[0] = table[i[2]];
   bgr[1] = table[i[1]];
   bgr[2] = table[i[0]];
+}
+
+// encode3 of two pixels (lanes 0-2 and 4-6), written at bgr and bgr + 3.
+[[gnu::always_inline]] inline void encode3x2(const std::uint8_t* table, Float8 rgb, std::uint8_t* bgr) {
+  Float8 s = rgb * float(kEncodeSize - 1) + 0.5f;
+  s = s > 0.f ? s : 0.f;
+  s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
+  const Int8 i = __builtin_convertvector(s, Int8);
+  bgr[0] = table[i[2]];
+  bgr[1] = table[i[1]];
+  bgr[2] = table[i[0]];
+  bgr[3] = table[i[6]];
+  bgr[4] = table[i[5]];
+  bgr[5] = table[i[4]];
 }
 
 inline float smoothstep01(float t) {
@@ -250,7 +281,31 @@ void Compositor::composite(const CompositeInputs& in, CompositeResult& r, bool d
                     gain * (w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]), 0.f};
     };
 
+    // Two CG-only pixels at a time (most of the frame), where both read a whole 2 x 2 block:
+    // the same operations lane by lane as cgColour's vector line and encode3.
+    const Float8 gain8 = splat2(gain, gain);
+    auto cgOnlyPair = [&](int u) __attribute__((always_inline)) {
+      const Tap& ta = tap_row[u];
+      const Tap& tb = tap_row[u + 1];
+      if (debug || al[u] > 0 || al[u + 1] > 0 || ta.index < 0 || tb.index < 0 || ta.index >= vector_taps_below ||
+          tb.index >= vector_taps_below)
+        return false;
+      const float* a00 = cg_rgb + 3 * static_cast<size_t>(ta.index);
+      const float* b00 = cg_rgb + 3 * static_cast<size_t>(tb.index);
+      const float* a10 = a00 + 3 * static_cast<size_t>(dy1_row);
+      const float* b10 = b00 + 3 * static_cast<size_t>(dy1_row);
+      const Float8 ax = splat2(ta.ax, tb.ax), ay = splat2(ta.ay, tb.ay);
+      const Float8 w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+      const Float8 c = gain8 * (w00 * load4x2(a00, b00) + w01 * load4x2(a00 + 3 * dx1_row, b00 + 3 * dx1_row) +
+                                w10 * load4x2(a10, b10) + w11 * load4x2(a10 + 3 * dx1_row, b10 + 3 * dx1_row));
+      encode3x2(enc_row, c, o + 3 * u);
+      return true;
+    };
     for (int u = 0; u < W; ++u) {
+      if (u + 1 < W && cgOnlyPair(u)) {
+        ++u;
+        continue;
+      }
       const Tap t = tap_row[u];
       if (!(al[u] > 0) && !debug) {
         encode3(enc_row, cgColour(t), o + 3 * u);  // no actor (most of the frame): the CG alone

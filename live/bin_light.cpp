@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <opencv2/core/hal/intrin.hpp>
 
+#include "core/error.h"
 #include "core/simd.h"
 
 namespace previz::live {
@@ -93,8 +95,14 @@ void bin2(const cv::Mat& src, cv::Size size, cv::Mat& dst) {
 }  // namespace
 
 void binLight(const cv::Mat& src, int bin, cv::Size size, cv::Mat& dst) {
-  CV_Assert(src.type() == CV_8UC3 && !src.empty() && bin >= 1 && size.width >= 1 && size.height >= 1 &&
-            size.width <= (src.cols + bin - 1) / bin && size.height <= (src.rows + bin - 1) / bin);
+  if (src.empty() || src.type() != CV_8UC3)
+    throw Error("binning: the plate must be 8-bit BGR (got " +
+                (src.empty() ? std::string("an empty image") : cv::typeToString(src.type())) + ")");
+  if (bin < 1 || size.width < 1 || size.height < 1 || size.width > (src.cols + bin - 1) / bin ||
+      size.height > (src.rows + bin - 1) / bin)
+    throw Error("binning: " + std::to_string(src.cols) + "x" + std::to_string(src.rows) + " cannot bin " +
+                std::to_string(bin) + " x " + std::to_string(bin) + " into " + std::to_string(size.width) + "x" +
+                std::to_string(size.height));
   dst.create(size, CV_8UC3);
   if (bin == 2) {
     bin2(src, size, dst);

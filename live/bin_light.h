@@ -13,8 +13,9 @@ namespace previz::live {
 // dst (CV_8UC3, 'size') pixel (x, y), each channel: round(sqrt(mean of code^2 over the plate's
 // pixels (x * bin + i, y * bin + j), i, j in [0, bin)), the mean rounded to the nearest integer
 // first. Plate columns and rows past the edge (a binned size rounded up) repeat the last one.
-// src: CV_8UC3 of at least one pixel; 1 <= bin; size: ceil(src / bin) or less. dst is reused
-// when it has that size and type. bin 2, the live preview's, runs 16 output pixels at a time.
+// src: CV_8UC3 of at least one pixel; 1 <= bin; size: ceil(src / bin) or less (else throws
+// Error saying which). dst is reused when it has that size and type. bin 2, the live preview's,
+// runs 16 output pixels at a time.
 void binLight(const cv::Mat& src, int bin, cv::Size size, cv::Mat& dst);
 
 }  // namespace previz::live

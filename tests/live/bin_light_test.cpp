@@ -2,6 +2,8 @@
 // definition, computed here pixel by pixel: the 16-pixel bin-2 loop and the general one.
 #include "live/bin_light.h"
 
+#include "core/error.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -76,6 +78,27 @@ TEST(BinLight, AveragesLightNotCodes) {
   src.setTo(cv::Scalar(7, 200, 99));
   binLight(src, 2, cv::Size(1, 1), out);
   EXPECT_EQ(out.at<cv::Vec3b>(0, 0), cv::Vec3b(7, 200, 99));  // a uniform block gives its code back
+}
+
+// A plate binning cannot read (another pixel type, nothing) or a size it cannot fill: an Error
+// saying which, not an OpenCV assertion.
+TEST(BinLight, RefusesWhatItCannotBinSayingWhy) {
+  cv::Mat out;
+  auto message = [&](const cv::Mat& src, int bin, cv::Size size) {
+    try {
+      binLight(src, bin, size, out);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message(cv::Mat(4, 4, CV_16UC3, cv::Scalar(0)), 2, cv::Size(2, 2)).find("8-bit BGR (got CV_16UC3)"),
+            std::string::npos);
+  EXPECT_NE(message(cv::Mat(), 2, cv::Size(2, 2)).find("an empty image"), std::string::npos);
+  EXPECT_NE(message(cv::Mat(4, 4, CV_8UC3, cv::Scalar(0)), 2, cv::Size(3, 2)).find("4x4 cannot bin 2 x 2 into 3x2"),
+            std::string::npos);
+  EXPECT_NE(message(cv::Mat(4, 4, CV_8UC3, cv::Scalar(0)), 0, cv::Size(2, 2)).find("cannot bin 0 x 0"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The hot loops' AVX2 and baseline versions (core/simd.h, PREVIZ_WIDE) give the same bits:
-# `previz run` (key, carve, depth, props, composite) and `previz carve` (the 5 mm hull, its mesh
-# and main-view depth) on a small studio take, natively (the AVX2 versions: the test needs a CPU
+# `previz run` (key, carve, depth, props, composite; once with the debug layers, once as live
+# preview: witnesses binned 2 x 2, the composite without layers, whose CG-only pixels go two at a
+# time) and `previz carve` (the 5 mm hull, its mesh and main-view depth) on a small studio take, natively (the AVX2 versions: the test needs a CPU
 # with AVX2) and under qemu-x86_64 emulating a CPU without AVX (Nehalem: the baseline versions).
 # Every output file is compared byte for byte, the JSON lines with their timings taken out.
 #   wide_test.sh PREVIZ_BIN TMPDIR
@@ -31,6 +32,9 @@ for who in native emulated; do
   run=(); [ $who = emulated ] && run=(emulated)
   "${run[@]}" "$bin" run --take "$take" --out "$tmp/run_$who" --layers --threads 2 --quiet 2> "$tmp/run_$who.err" \
     && ok "run ($who)" || fail "run ($who): $(grep -v '^qemu' "$tmp/run_$who.err")"
+  "${run[@]}" "$bin" run --take "$take" --out "$tmp/preview_$who" --witness-bin 2 --threads 2 --quiet \
+      2> "$tmp/preview_$who.err" \
+    && ok "run --witness-bin 2 ($who)" || fail "run --witness-bin 2 ($who): $(grep -v '^qemu' "$tmp/preview_$who.err")"
   "${run[@]}" "$bin" carve --take "$take" --rig "$take/truth/rig.json" --main-poses "$take/truth/main_poses.jsonl" \
       --out "$tmp/carve_$who" --no-points --threads 2 --quiet 2> "$tmp/carve_$who.err" \
     && ok "carve ($who)" || fail "carve ($who): $(grep -v '^qemu' "$tmp/carve_$who.err")"
@@ -38,7 +42,7 @@ done
 
 # Every file of both outputs, the same list and the same bytes; JSON lines compared without
 # their timings.
-for out in run carve; do
+for out in run preview carve; do
   a="$tmp/${out}_native" b="$tmp/${out}_emulated"
   if python3 - "$a" "$b" <<'PY'
 import json, os, sys

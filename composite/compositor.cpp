@@ -63,14 +63,20 @@ typedef std::int32_t Int8 __attribute__((vector_size(32)));
   return __builtin_shufflevector(Float4{a, a, a, a}, Float4{b, b, b, b}, 0, 1, 2, 3, 4, 5, 6, 7);
 }
 
-// Linear R, G, B (lanes 0-2) -> the 8-bit codes, written B, G, R. Clamped without branches
-// (min/max; the CG's values are random to the branch predictor), NaN to 0 (an EXR may hold NaN:
-// it used to index the table at INT_MIN).
-inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
-  Float4 s = rgb * float(kEncodeSize - 1) + 0.5f;
+// Linear values -> the encode table's indices, lane by lane (Float4 -> Int4, Float8 -> Int8).
+// Clamped without branches (min/max; the CG's values are random to the branch predictor), NaN to
+// 0 (an EXR may hold NaN: it used to index the table at INT_MIN).
+template <typename Int, typename Float>
+[[gnu::always_inline]] inline Int encodeIndex(Float linear) {
+  Float s = linear * float(kEncodeSize - 1) + 0.5f;
   s = s > 0.f ? s : 0.f;
   s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
-  const Int4 i = __builtin_convertvector(s, Int4);
+  return __builtin_convertvector(s, Int);
+}
+
+// Linear R, G, B (lanes 0-2) -> the 8-bit codes, written B, G, R.
+inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
+  const Int4 i = encodeIndex<Int4>(rgb);
   bgr[0] = table[i[2]];
   bgr[1] = table[i[1]];
   bgr[2] = table[i[0]];
@@ -78,10 +84,7 @@ inline void encode3(const std::uint8_t* table, Float4 rgb, std::uint8_t* bgr) {
 
 // encode3 of two pixels (lanes 0-2 and 4-6), written at bgr and bgr + 3.
 [[gnu::always_inline]] inline void encode3x2(const std::uint8_t* table, Float8 rgb, std::uint8_t* bgr) {
-  Float8 s = rgb * float(kEncodeSize - 1) + 0.5f;
-  s = s > 0.f ? s : 0.f;
-  s = s < float(kEncodeSize - 1) ? s : float(kEncodeSize - 1);
-  const Int8 i = __builtin_convertvector(s, Int8);
+  const Int8 i = encodeIndex<Int8>(rgb);
   bgr[0] = table[i[2]];
   bgr[1] = table[i[1]];
   bgr[2] = table[i[0]];

@@ -51,8 +51,8 @@ struct DetectStats {
 // camera's failures.
 // An image in which fewer board points are visible than the detector needs (truth: the board is
 // out of view, faces away or is hidden) holds no board to find: it is neither rendered nor
-// detected. That is ~45 % of the rig's images, and the detector (full-resolution AprilTag,
-// ~0.15 s a 1280x720 image and ~0.35 s a 1920x1080 one on one core) is most of the cost.
+// detected. That is ~45 % of the rig's images, and the detector (libapriltag at full resolution
+// within the board's window, calib/detect_aprilgrid.cpp) and the rendering are the cost.
 void renderAndDetect(const synth::RigCapture& capture, const std::vector<int>& cameras, int frames,
                      multicam::RigObservations& obs, DetectStats& stats) {
   const Clock::time_point start = Clock::now();

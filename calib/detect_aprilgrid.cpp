@@ -167,33 +167,54 @@ void detectAprilGrid(const DetectInput& input, const BoardSpec& board, ViewObser
   // passes' (Kalibr's EuRoC photo: 32, 35 and 36 of its 36 tags at 1, 2 and 3).
   // The passes search only the part of the image the board can cover (boardWindow, from a pass
   // at a quarter of the resolution): a rig capture's board is often a tenth of the frame.
-  const cv::Rect window = boardWindow(detector.get(), im, board);
-  image_u8_t sub{window.width, window.height, im.stride, im.buf + window.y * im.stride + window.x};
+  // The window is a prediction from the board file: a tag found within 1.5 tag edges of a side
+  // of it that is not the image's says the board goes on beyond it (another board than the
+  // file's, a lens the homography misses), and every pass is run again on the whole image.
   std::unique_ptr<zarray_t, DetectionsDeleter> passes[3];
-  const float decimation[3] = {1.0f, 2.0f, 3.0f};
-  for (int pass = 0; pass < 3; ++pass) {
-    if (pass > 0 && static_cast<int>(seen.size()) == n_tags) break;
-    detector.get()->quad_decimate = decimation[pass];
-    passes[pass].reset(apriltag_detector_detect(detector.get(), &sub));
-    std::map<int, int> found;
-    std::vector<apriltag_detection_t*> found_tags;
-    for (int k = 0; k < zarray_size(passes[pass].get()); ++k) {
-      apriltag_detection_t* det = nullptr;
-      zarray_get(passes[pass].get(), k, &det);
-      for (int q = 0; q < 4; ++q) det->p[q][0] += window.x, det->p[q][1] += window.y;
-      det->c[0] += window.x, det->c[1] += window.y;
-      const int index = det->id - board.first_id;
-      if (index < 0 || index >= n_tags) {
-        if (pass == 0) ++other_tags;
-        continue;
+  auto search = [&](const cv::Rect& window) {
+    mine.clear(), seen.clear(), other_tags = 0;
+    image_u8_t sub{window.width, window.height, im.stride, im.buf + window.y * im.stride + window.x};
+    const float decimation[3] = {1.0f, 2.0f, 3.0f};
+    bool near_side = false;
+    for (int pass = 0; pass < 3; ++pass) {
+      passes[pass].reset();
+      if (pass > 0 && static_cast<int>(seen.size()) == n_tags) continue;
+      detector.get()->quad_decimate = decimation[pass];
+      passes[pass].reset(apriltag_detector_detect(detector.get(), &sub));
+      std::map<int, int> found;
+      std::vector<apriltag_detection_t*> found_tags;
+      for (int k = 0; k < zarray_size(passes[pass].get()); ++k) {
+        apriltag_detection_t* det = nullptr;
+        zarray_get(passes[pass].get(), k, &det);
+        double edge = 0, x_lo = det->p[0][0], x_hi = x_lo, y_lo = det->p[0][1], y_hi = y_lo;
+        for (int q = 0; q < 4; ++q) {
+          edge = std::max(edge, std::hypot(det->p[q][0] - det->p[(q + 1) % 4][0], det->p[q][1] - det->p[(q + 1) % 4][1]));
+          x_lo = std::min(x_lo, det->p[q][0]), x_hi = std::max(x_hi, det->p[q][0]);
+          y_lo = std::min(y_lo, det->p[q][1]), y_hi = std::max(y_hi, det->p[q][1]);
+        }
+        const double reach = 1.5 * edge;
+        near_side |= (window.x > 0 && x_lo < reach) || (window.y > 0 && y_lo < reach) ||
+                     (window.br().x < im.width && x_hi > window.width - reach) ||
+                     (window.br().y < im.height && y_hi > window.height - reach);
+        for (int q = 0; q < 4; ++q) det->p[q][0] += window.x, det->p[q][1] += window.y;
+        det->c[0] += window.x, det->c[1] += window.y;
+        const int index = det->id - board.first_id;
+        if (index < 0 || index >= n_tags) {
+          if (pass == 0) ++other_tags;
+          continue;
+        }
+        if (pass > 0 && seen.count(det->id)) continue;
+        ++found[det->id];
+        found_tags.push_back(det);
       }
-      if (pass > 0 && seen.count(det->id)) continue;
-      ++found[det->id];
-      found_tags.push_back(det);
+      for (const auto& [id, count] : found) seen[id] += count;
+      mine.insert(mine.end(), found_tags.begin(), found_tags.end());
     }
-    for (const auto& [id, count] : found) seen[id] += count;
-    mine.insert(mine.end(), found_tags.begin(), found_tags.end());
-  }
+    return !near_side;
+  };
+  const cv::Rect whole(0, 0, im.width, im.height);
+  const cv::Rect window = boardWindow(detector.get(), im, board);
+  if (!search(window) && window != whole) search(whole);
   if (mine.empty()) {
     out.failure = other_tags == 0 ? "no tag36h11 tags found (tags with a " + std::to_string(board.tag_border_cells) +
                                         "-cell black border looked for)"

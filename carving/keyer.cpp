@@ -848,7 +848,8 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   WinI fg[kMaxWinRows], unknown[kMaxWinRows];
   WinF sum_sb{}, sum_sg{}, sum_sr{}, sum_gb{}, sum_gg{}, sum_gr{}, sum_pb{}, sum_pg{}, sum_pr{};
   WinI n_screen_v{}, n_garbage_v{}, any_fg_v{};
-  const WinI in_window = WinI{0, 1, 2, 3, 4, 5, 6, 7} < width;
+  const WinI lane{0, 1, 2, 3, 4, 5, 6, 7};
+  const WinI in_window = lane < width;
   for (int i = 0; i < rows; ++i) {
     const int yy = y0 + i;
     const std::uint8_t* c = cls.ptr<std::uint8_t>(yy) + x0;
@@ -874,14 +875,9 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
         }
       }
     }
-    if (yy == y) k[x - x0] = kUnknown + 16;  // itself: a candidate (> kUnknown), never background
-    const WinI is_screen = k == kScreen, is_garbage = k == kGarbage;
-    WinI is_fg = k > kUnknown, is_unknown = k == kUnknown;
-    if (yy == y) {  // itself keeps its own class for F's candidates
-      const int own = c[x - x0];
-      is_fg[x - x0] = own > kUnknown ? -1 : 0;
-      is_unknown[x - x0] = own == kUnknown ? -1 : 0;
-    }
+    const WinI itself = yy == y ? lane == x - x0 : WinI{};
+    const WinI is_screen = (k == kScreen) & ~itself, is_garbage = (k == kGarbage) & ~itself;
+    const WinI is_fg = k > kUnknown, is_unknown = k == kUnknown;
     wb[i] = b, wg[i] = g, wr[i] = r;
     fg[i] = is_fg, unknown[i] = is_unknown;
     sum_sb += pick(is_screen, b, WinF{}), sum_sg += pick(is_screen, g, WinF{}), sum_sr += pick(is_screen, r, WinF{});

@@ -45,6 +45,19 @@ void TrackerOptions::validate() const {
   if (threads < 0) bad("threads", "threads must be >= 0");
 }
 
+namespace {
+// A frame between begin() and finish(). At namespace scope, not nested in Impl: clang (the fuzz
+// build) decides whether a nested class with member initializers is default-constructible
+// before the enclosing class is complete, and then rejects std::optional's emplace().
+struct PendingFrame {
+  TrackFrame out;
+  std::vector<std::vector<TagDetection>> found;
+  const std::vector<cv::Mat>* images = nullptr;
+  std::vector<double> search_ms;  // each camera's search, wall
+  int frames_since_full = 0;      // the whole-frame schedule once this frame is finished
+};
+}  // namespace
+
 struct PropTracker::Impl {
   std::vector<RigCamera> cameras;
   PropSet props;
@@ -61,13 +74,7 @@ struct PropTracker::Impl {
   int frames_since_full = 0;
   bool any_frame = false;
   // The frame between begin() and finish(): its result so far, each camera's tags, its images.
-  struct Pending {
-    TrackFrame out;
-    std::vector<std::vector<TagDetection>> found;
-    const std::vector<cv::Mat>* images = nullptr;
-    std::vector<double> search_ms;  // each camera's search, wall
-    int frames_since_full = 0;      // the whole-frame schedule once this frame is finished
-  };
+  using Pending = PendingFrame;
   std::optional<Pending> pending;
 
   // Camera c's search of the regions planned in pending->out.search[c] (its whole frame, or

@@ -800,6 +800,23 @@ constexpr int kMaxWinRows = 7;  // 2 * 3 + 1: KeyerOptions::edge_radius_px is at
 }
 [[gnu::always_inline]] inline WinF pick(WinI mask, WinF a, WinF b) { return mask ? a : b; }
 
+// A window row's colours in linear light (p: its B, G, R bytes), lane i = pixel i; lanes past
+// the window (in_window false) are 0. 'whole': eight pixels can be read, and the vectors are
+// built in registers (lanes stored one by one and read back as a vector stall the load: the key
+// was 1.3-1.4x slower that way); else only the window's pixels are read, lane by lane.
+[[gnu::always_inline]] inline void linearRow(const std::uint8_t* p, const std::array<float, 256>& lut, bool whole,
+                                             WinI in_window, WinF& b, WinF& g, WinF& r) {
+  if (whole) {
+    b = WinF{lut[p[0]], lut[p[3]], lut[p[6]], lut[p[9]], lut[p[12]], lut[p[15]], lut[p[18]], lut[p[21]]};
+    g = WinF{lut[p[1]], lut[p[4]], lut[p[7]], lut[p[10]], lut[p[13]], lut[p[16]], lut[p[19]], lut[p[22]]};
+    r = WinF{lut[p[2]], lut[p[5]], lut[p[8]], lut[p[11]], lut[p[14]], lut[p[17]], lut[p[20]], lut[p[23]]};
+    b = pick(in_window, b, WinF{}), g = pick(in_window, g, WinF{}), r = pick(in_window, r, WinF{});
+    return;
+  }
+  b = g = r = WinF{};
+  for (int j = 0; j < kWinLanes && in_window[j]; ++j) b[j] = lut[p[3 * j]], g[j] = lut[p[3 * j + 1]], r[j] = lut[p[3 * j + 2]];
+}
+
 // Two-colour alpha of pixel (x, y) from its window: B = local background, F = the mean of the
 // foreground neighbours whose lines to B pass closest to the pixel's colour and that are nearly
 // the purest of those (at least kPureReach of the farthest one's distance from B). Returns -1
@@ -850,31 +867,20 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
   WinI n_screen_v{}, n_garbage_v{}, any_fg_v{};
   const WinI lane{0, 1, 2, 3, 4, 5, 6, 7};
   const WinI in_window = lane < width;
+  const bool whole_rows = x0 + kWinLanes <= cls.cols;  // eight pixels can be read from x0
   for (int i = 0; i < rows; ++i) {
     const int yy = y0 + i;
     const std::uint8_t* c = cls.ptr<std::uint8_t>(yy) + x0;
     const std::uint8_t* p = bgr8.ptr<std::uint8_t>(yy) + 3 * x0;
     WinI k;
-    WinF b, g, r;
-    if (x0 + kWinLanes <= cls.cols) {
-      // Eight pixels read at once, those past the window masked. Built in registers: lanes
-      // stored one by one and read back as a vector stall the load (the key was 1.3-1.4x
-      // slower that way).
+    if (whole_rows) {
       k = __builtin_convertvector(loadBytes8(c), WinI);
-      b = WinF{lut[p[0]], lut[p[3]], lut[p[6]], lut[p[9]], lut[p[12]], lut[p[15]], lut[p[18]], lut[p[21]]};
-      g = WinF{lut[p[1]], lut[p[4]], lut[p[7]], lut[p[10]], lut[p[13]], lut[p[16]], lut[p[19]], lut[p[22]]};
-      r = WinF{lut[p[2]], lut[p[5]], lut[p[8]], lut[p[11]], lut[p[14]], lut[p[17]], lut[p[20]], lut[p[23]]};
       k = in_window ? k : -1;
-      b = pick(in_window, b, WinF{}), g = pick(in_window, g, WinF{}), r = pick(in_window, r, WinF{});
     } else {
-      for (int j = 0; j < kWinLanes; ++j) {
-        if (j < width) {
-          k[j] = c[j], b[j] = lut[p[3 * j]], g[j] = lut[p[3 * j + 1]], r[j] = lut[p[3 * j + 2]];
-        } else {
-          k[j] = -1, b[j] = g[j] = r[j] = 0.0f;
-        }
-      }
+      for (int j = 0; j < kWinLanes; ++j) k[j] = j < width ? c[j] : -1;
     }
+    WinF b, g, r;
+    linearRow(p, lut, whole_rows, in_window, b, g, r);
     const WinI itself = yy == y ? lane == x - x0 : WinI{};
     const WinI is_screen = (k == kScreen) & ~itself, is_garbage = (k == kGarbage) & ~itself;
     const WinI is_fg = k > kUnknown, is_unknown = k == kUnknown;
@@ -886,16 +892,9 @@ float edgeAlpha(const cv::Mat& bgr8, const cv::Mat& cls, const ScreenModel& sm, 
     n_garbage_v -= is_garbage;
     any_fg_v |= is_fg;
     if (use_plate) {
-      // Only background lanes are summed, and lanes past the window are never background.
-      const std::uint8_t* q = sm.plate.ptr<std::uint8_t>(yy) + 3 * x0;
-      WinF pb{}, pg{}, pr{};
-      if (x0 + kWinLanes <= cls.cols) {
-        pb = WinF{lut[q[0]], lut[q[3]], lut[q[6]], lut[q[9]], lut[q[12]], lut[q[15]], lut[q[18]], lut[q[21]]};
-        pg = WinF{lut[q[1]], lut[q[4]], lut[q[7]], lut[q[10]], lut[q[13]], lut[q[16]], lut[q[19]], lut[q[22]]};
-        pr = WinF{lut[q[2]], lut[q[5]], lut[q[8]], lut[q[11]], lut[q[14]], lut[q[17]], lut[q[20]], lut[q[23]]};
-      } else {
-        for (int j = 0; j < width; ++j) pb[j] = lut[q[3 * j]], pg[j] = lut[q[3 * j + 1]], pr[j] = lut[q[3 * j + 2]];
-      }
+      // Only background lanes are summed.
+      WinF pb, pg, pr;
+      linearRow(sm.plate.ptr<std::uint8_t>(yy) + 3 * x0, lut, whole_rows, in_window, pb, pg, pr);
       const WinI bg = is_screen | is_garbage;
       sum_pb += pick(bg, pb, WinF{}), sum_pg += pick(bg, pg, WinF{}), sum_pr += pick(bg, pr, WinF{});
     }
